@@ -1,0 +1,1 @@
+"""Stochastic averaging of the energy envelope: symbolic coefficients, stationary and transient densities."""

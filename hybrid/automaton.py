@@ -1,0 +1,305 @@
+"""A hybrid automaton declared as plain data with sympy expressions.
+
+A :class:`HybridAutomaton` holds state variables, named parameters with defaults, modes with flows (and optional
+noise coefficients) and transitions. A transition fires when its guard expression crosses zero in the declared
+direction; it then maps the state through its reset and switches mode. Simulators (``hybrid.deterministic``,
+``hybrid.stochastic``) consume this data; nothing here integrates anything.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import sympy as sp
+
+from .errors import ModelError
+
+ResetMap = tuple[sp.Expr, ...] | Callable
+
+
+def real_symbol(name: str) -> sp.Symbol:
+    """The canonical symbol for ``name``: every expression in this package uses real symbols.
+
+    Examples
+    --------
+    >>> real_symbol("x").is_real
+    True
+    """
+    return sp.Symbol(name, real=True)
+
+
+def canonical(expr: sp.Expr) -> sp.Expr:
+    """Replace every free symbol by the real symbol of the same name, so that symbols compare by name."""
+    return expr.xreplace({s: real_symbol(s.name) for s in expr.free_symbols if isinstance(s, sp.Symbol)})
+
+
+def _as_expr(value, where: str) -> sp.Expr:
+    try:
+        expr = sp.sympify(value, locals=_LOCALS) if isinstance(value, str) else sp.sympify(value)
+    except (sp.SympifyError, TypeError, SyntaxError) as exc:
+        raise ModelError(f"{where}: cannot read {value!r} as a sympy expression ({exc})") from exc
+    return canonical(expr)
+
+
+class _RealSymbols(dict):
+    """sympify locals that turn every unknown name into a real symbol (keeps functions such as sqrt, Abs)."""
+
+    def __missing__(self, key):
+        if hasattr(sp, key) and key not in ("E", "I", "S", "N", "O", "Q", "beta", "gamma", "zeta", "pi"):
+            raise KeyError(key)
+        return real_symbol(key)
+
+
+_LOCALS = _RealSymbols()
+
+
+@dataclass(frozen=True)
+class Mode:
+    """A continuous mode: ``d state / dt = flow`` (plus ``noise`` times white noise, if given).
+
+    Parameters
+    ----------
+    name : str
+        Mode name, unique within the automaton.
+    flow : sequence of sympy expressions
+        Time derivative of each state variable, in the automaton's state order.
+    noise : sequence of sympy expressions, optional
+        Coefficient of a scalar Itô white noise dB/dt on each state variable (zero where absent).
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> x, y = sp.symbols("x y")
+    >>> Mode("free", (y, -x)).name
+    'free'
+    """
+
+    name: str
+    flow: tuple[sp.Expr, ...]
+    noise: tuple[sp.Expr, ...] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "flow", tuple(_as_expr(f, f"flow of mode {self.name!r}") for f in self.flow))
+        if self.noise is not None:
+            object.__setattr__(
+                self, "noise", tuple(_as_expr(f, f"noise of mode {self.name!r}") for f in self.noise)
+            )
+
+
+@dataclass(frozen=True)
+class Transition:
+    """A guarded jump between modes.
+
+    Parameters
+    ----------
+    name : str
+        Transition name (used in impact logs).
+    source, target : str
+        Mode names.
+    guard : sympy expression
+        The transition fires when ``guard`` crosses zero.
+    direction : int
+        +1: only upward crossings (guard goes from negative to positive); -1: only downward; 0: both.
+    reset : tuple of sympy expressions or callable
+        New state, as expressions of the pre-jump state and parameters, or a callable
+        ``reset(state: numpy array, params: dict) -> numpy array``.
+    priority : int
+        When several guards fire at the same instant, the lowest priority number wins.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> x, y = sp.symbols("x y")
+    >>> t = Transition("floor", "air", "air", guard=-x, direction=1, reset=(x, -y / 2))
+    >>> t.direction
+    1
+    """
+
+    name: str
+    source: str
+    target: str
+    guard: sp.Expr
+    direction: int = 0
+    reset: ResetMap = ()
+    priority: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "guard", _as_expr(self.guard, f"guard of transition {self.name!r}"))
+        if self.direction not in (-1, 0, 1):
+            raise ModelError(
+                f"transition {self.name!r}: direction must be -1, 0 or +1, got {self.direction!r}"
+            )
+        if not callable(self.reset):
+            object.__setattr__(
+                self, "reset", tuple(_as_expr(r, f"reset of transition {self.name!r}") for r in self.reset)
+            )
+
+    @property
+    def symbolic_reset(self) -> bool:
+        """True when the reset is a tuple of sympy expressions (it can be compiled)."""
+        return not callable(self.reset)
+
+
+@dataclass(frozen=True)
+class HybridAutomaton:
+    """Hybrid automaton: states, parameters, modes with flows, guarded transitions with resets.
+
+    Parameters
+    ----------
+    states : sequence of sympy symbols
+        State variables, in order.
+    parameters : mapping of str to float
+        Named parameters with their default values. Expressions may use them as symbols of the same name.
+    modes : sequence of Mode
+    transitions : sequence of Transition
+    initial_mode : str, optional
+        Defaults to the first mode.
+    observables : mapping of str to sympy expression, optional
+        Quantities logged before and after each jump (for example the energy ``H``).
+
+    Raises
+    ------
+    ModelError
+        On unknown symbols, duplicate names, unknown modes, or a reset that does not map every state.
+
+    Examples
+    --------
+    A bouncing ball over a floor at x = 0 with restitution r:
+
+    >>> import sympy as sp
+    >>> x, v = sp.symbols("x v")
+    >>> ball = HybridAutomaton(
+    ...     states=(x, v), parameters={"g": 9.81, "r": 0.8},
+    ...     modes=[Mode("air", (v, -sp.Symbol("g")))],
+    ...     transitions=[Transition("floor", "air", "air", guard=x, direction=-1,
+    ...                             reset=(x, -sp.Symbol("r") * v))])
+    >>> ball.mode("air").flow[1]
+    -g
+    """
+
+    states: tuple[sp.Symbol, ...]
+    parameters: Mapping[str, float]
+    modes: tuple[Mode, ...]
+    transitions: tuple[Transition, ...] = ()
+    initial_mode: str | None = None
+    observables: Mapping[str, sp.Expr] = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "states", tuple(canonical(sp.sympify(s)) for s in self.states))
+        object.__setattr__(self, "modes", tuple(self.modes))
+        object.__setattr__(self, "transitions", tuple(self.transitions))
+        object.__setattr__(self, "parameters", MappingProxyType({k: float(v) for k, v in self.parameters.items()}))
+        object.__setattr__(
+            self,
+            "observables",
+            MappingProxyType({k: _as_expr(v, f"observable {k!r}") for k, v in self.observables.items()}),
+        )
+        if self.initial_mode is None:
+            if not self.modes:
+                raise ModelError("an automaton needs at least one mode")
+            object.__setattr__(self, "initial_mode", self.modes[0].name)
+        self.validate()
+
+    # ------------------------------------------------------------------ validation
+    def validate(self) -> None:
+        """Check names, symbols, dimensions; raise :class:`ModelError` with the first problem found."""
+        if len(self.states) == 0:
+            raise ModelError("an automaton needs at least one state variable")
+        for s in self.states:
+            if not isinstance(s, sp.Symbol):
+                raise ModelError(f"state variables must be sympy Symbols, got {s!r}")
+        names = [s.name for s in self.states]
+        if len(set(names)) != len(names):
+            raise ModelError(f"duplicate state variable names: {names}")
+        clash = set(names) & set(self.parameters)
+        if clash:
+            raise ModelError(f"names used both as state and parameter: {sorted(clash)}")
+        mode_names = [m.name for m in self.modes]
+        if len(set(mode_names)) != len(mode_names):
+            raise ModelError(f"duplicate mode names: {mode_names}")
+        if self.initial_mode not in mode_names:
+            raise ModelError(f"initial mode {self.initial_mode!r} is not one of {mode_names}")
+        known = set(names) | set(self.parameters)
+        n = len(self.states)
+
+        def check(expr: sp.Expr, where: str) -> None:
+            unknown = {str(s) for s in expr.free_symbols} - known
+            if unknown:
+                raise ModelError(
+                    f"{where} uses unknown symbols {sorted(unknown)}; declare them as states {names} "
+                    f"or parameters {sorted(self.parameters)}"
+                )
+
+        for m in self.modes:
+            if len(m.flow) != n:
+                raise ModelError(f"mode {m.name!r} has {len(m.flow)} flow components for {n} states {names}")
+            for f in m.flow:
+                check(f, f"flow of mode {m.name!r}")
+            if m.noise is not None:
+                if len(m.noise) != n:
+                    raise ModelError(f"mode {m.name!r} has {len(m.noise)} noise components for {n} states")
+                for f in m.noise:
+                    check(f, f"noise of mode {m.name!r}")
+        tnames = [t.name for t in self.transitions]
+        if len(set(tnames)) != len(tnames):
+            raise ModelError(f"duplicate transition names: {tnames}")
+        for t in self.transitions:
+            for end in (t.source, t.target):
+                if end not in mode_names:
+                    raise ModelError(f"transition {t.name!r} refers to unknown mode {end!r}; modes: {mode_names}")
+            check(t.guard, f"guard of transition {t.name!r}")
+            if t.symbolic_reset:
+                if len(t.reset) != n:
+                    raise ModelError(
+                        f"reset of transition {t.name!r} gives {len(t.reset)} values for {n} states {names}; "
+                        "a reset must map every state variable (repeat a state to keep it)"
+                    )
+                for r in t.reset:
+                    check(r, f"reset of transition {t.name!r}")
+        for k, v in self.observables.items():
+            check(v, f"observable {k!r}")
+
+    # ------------------------------------------------------------------ access
+    def mode(self, name: str) -> Mode:
+        """Return the mode called ``name``."""
+        for m in self.modes:
+            if m.name == name:
+                return m
+        raise ModelError(f"unknown mode {name!r}; modes: {[m.name for m in self.modes]}")
+
+    def transitions_from(self, mode: str) -> list[Transition]:
+        """Transitions leaving ``mode``, sorted by priority."""
+        return sorted((t for t in self.transitions if t.source == mode), key=lambda t: t.priority)
+
+    @property
+    def parameter_symbols(self) -> tuple[sp.Symbol, ...]:
+        """Parameter symbols in declaration order."""
+        return tuple(real_symbol(k) for k in self.parameters)
+
+    def resolve_parameters(self, overrides: Mapping[str, float] | None = None) -> dict[str, float]:
+        """Defaults updated with ``overrides``; unknown names raise :class:`ModelError`.
+
+        Examples
+        --------
+        >>> import sympy as sp
+        >>> x = sp.Symbol("x")
+        >>> A = HybridAutomaton(states=(x,), parameters={"k": 1.0}, modes=[Mode("m", (-sp.Symbol("k") * x,))])
+        >>> A.resolve_parameters({"k": 2})
+        {'k': 2.0}
+        """
+        values = dict(self.parameters)
+        for k, v in (overrides or {}).items():
+            if k not in values:
+                raise ModelError(f"unknown parameter {k!r}; known: {sorted(values)}")
+            values[k] = float(v)
+        return values
+
+
+def free_symbols_by_name(exprs: Sequence[sp.Expr]) -> set[str]:
+    """Names of the free symbols of several expressions (symbols compare by name across assumptions)."""
+    out: set[str] = set()
+    for e in exprs:
+        out |= {str(s) for s in sp.sympify(e).free_symbols}
+    return out

@@ -1,0 +1,29 @@
+"""Exceptions raised by the framework.
+
+Every error says what is wrong and how to fix it. They all derive from :class:`VibroError`, which is a
+``ValueError``, so ``except ValueError`` keeps working for callers that do not know this package.
+"""
+
+
+class VibroError(ValueError):
+    """Base class of every error raised on bad input or an impossible request."""
+
+
+class ModelError(VibroError):
+    """A model or automaton declaration is inconsistent (unknown symbols, bad reset, non-confining potential)."""
+
+
+class ParameterError(VibroError):
+    """A parameter value is out of its admissible range (negative barrier distance, noise intensity, step)."""
+
+
+class RestitutionError(VibroError):
+    """A restitution law gives a coefficient outside (0, 1]."""
+
+
+class NormalisationError(VibroError):
+    """A density cannot be normalised (no confinement, or energy grows without bound)."""
+
+
+class StepSizeError(VibroError):
+    """A time step is so large that a path could jump across the gap between the barriers."""

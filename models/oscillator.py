@@ -1,0 +1,474 @@
+"""The impact-oscillator base class: one declaration feeds every backend.
+
+A model is the equation of motion of the paper (eq. 1)
+
+    x'' + g(x) + eps * h(x, x') = eps**(1/2) * f_k(x, x') * xi_k(t),   x_left < x < x_right,
+
+with E[xi_k(t) xi_l(t + s)] = 2 D_kl delta(s), and impacts v+ = -e(|v-|) v- at the barriers. The user gives g, h,
+f_k and D_kl as sympy expressions (or strings) of the state symbols ``x`` and ``y`` (y = x') and of named
+parameters. The model derives the potential G, the energy H, the Itô drift and diffusion, the turning points and
+the hybrid automaton.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping, Sequence
+from functools import cached_property
+from types import MappingProxyType
+
+import numpy as np
+import sympy as sp
+from scipy import integrate
+
+from hybrid.automaton import HybridAutomaton, Mode, Transition, _as_expr, real_symbol
+from hybrid.errors import ModelError, ParameterError
+
+from .restitution import Elastic, RestitutionLaw
+
+X = real_symbol("x")
+"""Displacement symbol."""
+Y = real_symbol("y")
+"""Velocity symbol (y = dx/dt)."""
+
+
+class ImpactOscillator:
+    """A single-degree-of-freedom oscillator between rigid barriers, with white-noise forcing.
+
+    Parameters
+    ----------
+    restoring : expression in x
+        The restoring force g(x).
+    damping : expression in x, y
+        The damping force h(x, y) (multiplied by ``epsilon``).
+    noise : sequence of expressions in x, y
+        The noise coefficients f_k(x, y).
+    intensity : expression, or m x m nested sequence of expressions
+        The noise intensities D_kl (E[xi_k xi_l] = 2 D_kl delta). A scalar means D * identity.
+    parameters : mapping
+        Parameter names and default values. ``delta`` is the barrier distance when ``barriers='delta'``.
+    barriers : 'delta', a pair of expressions (left, right), or None
+        Barrier positions: symmetric at +-delta, asymmetric, or no barriers.
+    restitution : RestitutionLaw
+    epsilon : expression
+        The small parameter of eq. 1 (1 in the paper's examples).
+    nonnegative, positive : sequences of parameter names
+        Parameters that must be >= 0 (noise intensities) or > 0 (barrier distances).
+    name : str
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator, Newton
+    >>> m = ImpactOscillator("k*x", "c*y", parameters={"k": 1, "c": 0.1, "D": 0.05, "delta": 1.0},
+    ...                      restitution=Newton(0.8), name="linear")
+    >>> m.potential_expr
+    k*x**2/2
+    >>> round(m.barrier_energy, 6)
+    0.5
+    """
+
+    name = "oscillator"
+
+    def __init__(
+        self,
+        restoring,
+        damping=0,
+        noise: Sequence = (1,),
+        intensity="D",
+        parameters: Mapping[str, float] | None = None,
+        barriers="delta",
+        restitution: RestitutionLaw | None = None,
+        epsilon=1,
+        nonnegative: Sequence[str] = ("D",),
+        positive: Sequence[str] = ("delta",),
+        name: str | None = None,
+    ):
+        if name is not None:
+            self.name = name
+        self._declaration = dict(
+            restoring=restoring, damping=damping, noise=tuple(noise), intensity=intensity,
+            barriers=barriers, epsilon=epsilon, nonnegative=tuple(nonnegative), positive=tuple(positive),
+        )
+        self.g = _as_expr(restoring, "restoring force g(x)")
+        self.h = _as_expr(damping, "damping h(x, y)")
+        self.f = tuple(_as_expr(fk, f"noise coefficient f_{k + 1}") for k, fk in enumerate(noise))
+        if not self.f:
+            raise ModelError("declare at least one noise coefficient (use noise=(1,) and D=0 for a free system)")
+        m = len(self.f)
+        if isinstance(intensity, (list, tuple)):
+            rows = [[_as_expr(v, "noise intensity") for v in row] for row in intensity]
+            if len(rows) != m or any(len(r) != m for r in rows):
+                raise ModelError(f"intensity must be a {m}x{m} matrix for {m} noise coefficients")
+            self.intensity = sp.Matrix(rows)
+        else:
+            self.intensity = _as_expr(intensity, "noise intensity") * sp.eye(m)
+        if self.intensity != self.intensity.T:
+            raise ModelError("the intensity matrix D_kl must be symmetric")
+        self.epsilon = _as_expr(epsilon, "epsilon")
+        if barriers is None:
+            self.barrier_exprs = None
+        elif barriers == "delta":
+            d = real_symbol("delta")
+            self.barrier_exprs = (-d, d)
+        else:
+            left, right = barriers
+            self.barrier_exprs = (_as_expr(left, "left barrier"), _as_expr(right, "right barrier"))
+        self.restitution = restitution if restitution is not None else Elastic()
+        if not isinstance(self.restitution, RestitutionLaw):
+            raise ModelError(
+                f"restitution must be a RestitutionLaw (Elastic(), Newton(e), Ma(vc)), got {restitution!r}"
+            )
+        self._nonnegative = tuple(nonnegative)
+        self._positive = tuple(positive)
+        self.params = MappingProxyType(self._check_params(dict(parameters or {})))
+        self._check_symbols()
+
+    # ------------------------------------------------------------------ parameters
+    def _check_params(self, values: dict) -> dict:
+        out = {}
+        for k, v in values.items():
+            try:
+                out[k] = float(v)
+            except (TypeError, ValueError) as exc:
+                raise ParameterError(f"parameter {k}={v!r} is not a number") from exc
+            if not np.isfinite(out[k]) and not (k in self._positive and out[k] == np.inf):
+                raise ParameterError(f"parameter {k}={v!r} is not finite")
+        for k in self._nonnegative:
+            if k in out and out[k] < 0:
+                raise ParameterError(f"{k}={out[k]:g} is negative; a noise intensity must be >= 0")
+        for k in self._positive:
+            if k in out and not out[k] > 0:
+                raise ParameterError(
+                    f"{k}={out[k]:g} must be > 0 (a barrier distance); use a positive value, or inf for no barrier"
+                )
+        return out
+
+    def _check_symbols(self) -> None:
+        known = {"x", "y"} | set(self.params)
+        exprs = {"g": self.g, "h": self.h, "epsilon": self.epsilon}
+        exprs.update({f"f_{k + 1}": f for k, f in enumerate(self.f)})
+        exprs.update({"D": self.intensity})
+        if self.barrier_exprs is not None:
+            exprs.update({"left barrier": self.barrier_exprs[0], "right barrier": self.barrier_exprs[1]})
+        for where, e in exprs.items():
+            unknown = {s.name for s in e.free_symbols} - known
+            if unknown:
+                raise ModelError(
+                    f"{where} uses {sorted(unknown)}, which are neither the states x, y nor parameters "
+                    f"{sorted(self.params)}; add them to parameters={{...}}"
+                )
+        if Y in self.g.free_symbols:
+            raise ModelError("the restoring force g may depend on x only; put velocity terms in the damping h(x, y)")
+        if self.barrier_exprs is not None:
+            for b in self.barrier_exprs:
+                if b.free_symbols & {X, Y}:
+                    raise ModelError("barrier positions may depend on parameters only")
+            left, right = self.barriers
+            if not left < 0.0 < right:
+                raise ModelError(
+                    f"barriers must enclose the equilibrium x = 0: got left={left:g}, right={right:g}"
+                )
+
+    def with_params(self, **values: float) -> ImpactOscillator:
+        """A copy with some parameters changed (the model itself is never mutated).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> DuffingImpact().with_params(delta=1.2).params["delta"]
+        1.2
+        """
+        unknown = set(values) - set(self.params)
+        if unknown:
+            raise ParameterError(
+                f"unknown parameters {sorted(unknown)} for model {self.name!r}; known: {sorted(self.params)}"
+            )
+        new = object.__new__(type(self))
+        new.__dict__.update({k: v for k, v in self.__dict__.items() if k not in _CACHED})
+        new.params = MappingProxyType(self._check_params({**self.params, **values}))
+        new._check_symbols()
+        return new
+
+    def with_restitution(self, law: RestitutionLaw) -> ImpactOscillator:
+        """A copy with another restitution law.
+
+        Examples
+        --------
+        >>> from models import DuffingImpact, Elastic
+        >>> DuffingImpact().with_restitution(Elastic()).restitution
+        Elastic()
+        """
+        if not isinstance(law, RestitutionLaw):
+            raise ModelError(f"expected a RestitutionLaw, got {law!r}")
+        new = object.__new__(type(self))
+        new.__dict__.update({k: v for k, v in self.__dict__.items() if k not in _CACHED})
+        new.restitution = law
+        return new
+
+    @property
+    def parameter_symbols(self) -> dict[str, sp.Symbol]:
+        """Parameter name -> sympy symbol."""
+        return {k: real_symbol(k) for k in self.params}
+
+    def substitute(self, expr: sp.Expr) -> sp.Expr:
+        """``expr`` with the current parameter values substituted (leaves x, y and the speed v)."""
+        return sp.sympify(expr).xreplace({real_symbol(k): sp.Float(v) for k, v in self.params.items()})
+
+    # ------------------------------------------------------------------ barriers
+    @property
+    def barriers(self) -> tuple[float, float]:
+        """(left, right) barrier positions as floats; (-inf, inf) without barriers."""
+        if self.barrier_exprs is None:
+            return (-np.inf, np.inf)
+        left, right = (float(self.substitute(b)) for b in self.barrier_exprs)
+        return left, right
+
+    @property
+    def has_barriers(self) -> bool:
+        """True when at least one barrier is finite."""
+        left, right = self.barriers
+        return bool(np.isfinite(left) or np.isfinite(right))
+
+    @property
+    def is_symmetric(self) -> bool:
+        """True when G(left) = G(right), so that impacts start at one energy level (the paper's assumption)."""
+        left, right = self.barriers
+        if not self.has_barriers:
+            return True
+        if not (np.isfinite(left) and np.isfinite(right)):
+            return False
+        gl, gr = self.potential(np.array([left, right]))
+        return bool(abs(gl - gr) <= 1e-12 * max(1.0, abs(gl)))
+
+    @property
+    def barrier_energy(self) -> float:
+        """G(delta): the energy above which the oscillator hits the barriers (inf without barriers).
+
+        Raises
+        ------
+        ModelError
+            When G(left) != G(right): the energy-envelope averaging needs one impact energy level.
+        """
+        if not self.has_barriers:
+            return float("inf")
+        if not self.is_symmetric:
+            left, right = self.barriers
+            gl, gr = self.potential(np.array([left, right]))
+            raise ModelError(
+                f"G(left)={gl:.6g} differs from G(right)={gr:.6g}: the energy-envelope averaging assumes one impact "
+                "level G(delta). Use symmetric barriers for averaging; Monte Carlo and orbits accept asymmetric ones"
+            )
+        return float(self.potential(np.array([self.barriers[1]]))[0])
+
+    # ------------------------------------------------------------------ energy
+    @cached_property
+    def potential_expr(self) -> sp.Expr | None:
+        """G(x) = int_0^x g, symbolic with parameter symbols; None when sympy cannot integrate g."""
+        s = sp.Dummy("s", real=True)
+        G = sp.integrate(self.g.xreplace({X: s}), (s, 0, X))
+        if G.has(sp.Integral):
+            return None
+        return sp.expand(G)
+
+    @cached_property
+    def energy_expr(self) -> sp.Expr | None:
+        """H = y**2/2 + G(x), symbolic; None when G has no closed form."""
+        G = self.potential_expr
+        return None if G is None else Y**2 / 2 + G
+
+    @cached_property
+    def _g_numeric(self):
+        return sp.lambdify(X, self.substitute(self.g), ["scipy", "numpy"])
+
+    @cached_property
+    def _G_numeric(self):
+        G = self.potential_expr
+        if G is not None:
+            fn = sp.lambdify(X, self.substitute(G), "numpy")
+            return lambda x: np.broadcast_to(np.asarray(fn(x), dtype=float), np.shape(x)) + 0.0
+        g = self._g_numeric
+
+        def by_quadrature(x):
+            x = np.asarray(x, dtype=float)
+            flat = [integrate.quad(lambda s: float(g(s)), 0.0, xi, epsabs=1e-14, epsrel=1e-13)[0] for xi in x.ravel()]
+            return np.array(flat).reshape(x.shape)
+
+        return by_quadrature
+
+    def restoring(self, x):
+        """g(x), numerically, at the current parameters."""
+        x = np.asarray(x, dtype=float)
+        return np.broadcast_to(np.asarray(self._g_numeric(x), dtype=float), x.shape) + 0.0
+
+    def potential(self, x):
+        """G(x), numerically (closed form when sympy finds one, quadrature otherwise).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> float(DuffingImpact().potential(1.0))
+        0.55
+        """
+        x = np.asarray(x, dtype=float)
+        return self._G_numeric(x)
+
+    def energy(self, x, y):
+        """H = y**2/2 + G(x)."""
+        y = np.asarray(y, dtype=float)
+        return 0.5 * y * y + self.potential(x)
+
+    def check_single_well(self, samples: int = 2001) -> None:
+        """Require x * g(x) > 0 between the barriers (and G -> inf without them): one well, one orbit per level.
+
+        Raises
+        ------
+        ModelError
+            When the potential does not confine, or has several wells inside the barriers.
+        """
+        left, right = self.barriers
+        span_l = left if np.isfinite(left) else -50.0
+        span_r = right if np.isfinite(right) else 50.0
+        xs = np.concatenate([np.linspace(span_l, 0, samples)[:-1], np.linspace(0, span_r, samples)[1:]])
+        gx = self.restoring(xs)
+        bad = ~(xs * gx > 0)
+        if bad.any():
+            raise ModelError(
+                f"x*g(x) <= 0 at x={xs[bad][0]:.4g}: the potential G is not a single well between the barriers, "
+                "so energy levels are not single closed orbits. The averaging needs a confining single-well potential "
+                "(for example a > 0 and b >= 0 in a Duffing restoring force)"
+            )
+        if not (np.isfinite(left) and np.isfinite(right)):
+            far = self.potential(np.array([span_l, span_r]))
+            near = self.potential(np.array([span_l / 2, span_r / 2]))
+            if not np.all(far > 2 * near):
+                raise ModelError(
+                    "without barriers the potential must grow without bound (confine the motion); "
+                    "G does not grow enough at |x| = 50"
+                )
+
+    def turning_points(self, H):
+        """(A_minus, A_plus): where G(x) = H on each side of 0, vectorised; clipped to the barriers.
+
+        Examples
+        --------
+        >>> from models import ImpactOscillator
+        >>> m = ImpactOscillator("x", parameters={"D": 0.0}, barriers=None)
+        >>> [round(float(v), 9) for v in m.turning_points(0.5)]
+        [-1.0, 1.0]
+        """
+        H = np.asarray(H, dtype=float)
+        left, right = self.barriers
+        lo = self._solve_level(H, -1.0, left).reshape(H.shape)
+        hi = self._solve_level(H, +1.0, right).reshape(H.shape)
+        return lo, hi
+
+    def _solve_level(self, H, sign, bound):
+        """Root of G(sign * s) = H for s > 0 by vectorised bracketing and bisection (G is monotone there)."""
+        H = np.atleast_1d(H).astype(float)
+        limit = abs(bound) if np.isfinite(bound) else np.inf
+        upper = np.where(np.isfinite(limit), limit, 1.0) * np.ones_like(H)
+        if not np.isfinite(limit):
+            for _ in range(200):
+                short = self.potential(sign * upper) < H
+                if not short.any():
+                    break
+                upper = np.where(short, upper * 2.0, upper)
+        lower = np.zeros_like(H)
+        beyond = self.potential(sign * upper) <= H
+        for _ in range(120):
+            mid = 0.5 * (lower + upper)
+            below = self.potential(sign * mid) < H
+            lower = np.where(below, mid, lower)
+            upper = np.where(below, upper, mid)
+        return sign * np.where(beyond, upper, 0.5 * (lower + upper))
+
+    def amplitude(self, H):
+        """Turning amplitude A(H) with G(A) = H on the positive side (root finding; subclasses may override)."""
+        H = np.asarray(H, dtype=float)
+        out = self._solve_level(H, +1.0, self.barriers[1])
+        return out.reshape(H.shape)
+
+    # ------------------------------------------------------------------ stochastic structure
+    @cached_property
+    def ito_drift(self) -> sp.Expr:
+        """m(x, y) = -g - eps*h + eps * D_jk f_j df_k/dy (eq. 16: Itô form with the Wong-Zakai term)."""
+        m = len(self.f)
+        wz = sum(self.intensity[j, k] * self.f[j] * sp.diff(self.f[k], Y) for j in range(m) for k in range(m))
+        return sp.expand(-self.g - self.epsilon * self.h + self.epsilon * wz)
+
+    @cached_property
+    def diffusion_squared(self) -> sp.Expr:
+        """sigma**2(x, y) = 2 eps D_jk f_j f_k (eq. 17)."""
+        m = len(self.f)
+        pairs = sum(self.intensity[j, k] * self.f[j] * self.f[k] for j in range(m) for k in range(m))
+        return sp.expand(2 * self.epsilon * pairs)
+
+    @property
+    def additive_noise(self) -> bool:
+        """True when sigma does not depend on the state (Milstein then reduces to Euler-Maruyama)."""
+        return not (self.diffusion_squared.free_symbols & {X, Y})
+
+    # ------------------------------------------------------------------ automaton
+    def to_automaton(self) -> HybridAutomaton:
+        """The hybrid automaton: one mode ``free`` and one transition per finite barrier.
+
+        The reset is y -> -e(|y|) y with the model's restitution law (symbolic when the law has an expression).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> [t.name for t in DuffingImpact().to_automaton().transitions]
+        ['right', 'left']
+        """
+        flow = (Y, -self.g - self.epsilon * self.h)
+        noise = (sp.Integer(0), sp.sqrt(self.diffusion_squared))
+        mode = Mode("free", flow, noise)
+        transitions = []
+        if self.barrier_exprs is not None:
+            try:
+                e_expr = self.restitution.expression(sp.Abs(Y))
+                reset = (X, -e_expr * Y)
+            except Exception:  # a callable law has no expression: reset numerically
+                law = self.restitution
+
+                def reset(state, params, _law=law):
+                    out = np.array(state, dtype=float)
+                    out[1] = -_law.coefficient(abs(out[1])) * out[1]
+                    return out
+
+            left, right = self.barrier_exprs
+            if np.isfinite(self.barriers[1]):
+                transitions.append(Transition("right", "free", "free", X - right, +1, reset, priority=0))
+            if np.isfinite(self.barriers[0]):
+                transitions.append(Transition("left", "free", "free", X - left, -1, reset, priority=1))
+        observables = {"H": self.energy_expr} if self.energy_expr is not None else {}
+        return HybridAutomaton(
+            states=(X, Y), parameters=dict(self.params), modes=[mode], transitions=transitions,
+            observables=observables,
+        )
+
+    # ------------------------------------------------------------------ identity
+    def fingerprint(self) -> str:
+        """A hash of the symbolic declaration (not the parameter values): the key for cached compiled kernels."""
+        text = "|".join(
+            [str(self.g), str(self.h), ";".join(map(str, self.f)), str(self.intensity), str(self.epsilon),
+             str(self.barrier_exprs), ",".join(self.params)]
+        )
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def describe(self) -> dict:
+        """A JSON-friendly description: expressions, parameters, restitution."""
+        return {
+            "model": self.name,
+            "g": str(self.g), "h": str(self.h), "f": [str(f) for f in self.f],
+            "D": str(self.intensity.tolist()), "epsilon": str(self.epsilon),
+            "barriers": list(self.barriers), "parameters": dict(self.params),
+            "restitution": self.restitution.spec(),
+        }
+
+    def __repr__(self) -> str:
+        params = ", ".join(f"{k}={v:g}" for k, v in self.params.items())
+        return f"{type(self).__name__}({params}, restitution={self.restitution!r})"
+
+
+_CACHED = {"potential_expr", "energy_expr", "_g_numeric", "_G_numeric", "ito_drift", "diffusion_squared"}

@@ -1,0 +1,283 @@
+"""Restitution laws: the coefficient e(v) of an impact at speed v = |velocity before impact| > 0.
+
+Each law gives the coefficient as a vectorised numpy function and as a sympy expression of the speed, so that
+the same law feeds the deterministic backends, the compiled Monte Carlo kernels and the averaging. The velocity
+after the impact is ``v_plus = -e(|v_minus|) * v_minus``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+import numpy as np
+import sympy as sp
+
+from hybrid.automaton import _as_expr, real_symbol
+from hybrid.errors import ParameterError, RestitutionError
+
+SPEED = real_symbol("v")
+"""Symbol of the impact speed in restitution expressions."""
+
+# Speeds at which a law's coefficient is checked to lie in (0, 1].
+_CHECK_SPEEDS = np.concatenate([np.geomspace(1e-8, 1e4, 400), [0.4, 1.0]])
+
+
+class RestitutionLaw:
+    """Base class. Subclasses set :attr:`name`, :attr:`parameters` and implement :meth:`expression`.
+
+    Examples
+    --------
+    >>> Newton(0.8).coefficient(2.0)
+    0.8
+    """
+
+    name = "law"
+
+    def __init__(self, **parameters: float):
+        self.parameters: Mapping[str, float] = dict(parameters)
+
+    # symbolic form used by every backend
+    def expression(self, speed: sp.Symbol = SPEED) -> sp.Expr:
+        """e as a sympy expression of the impact speed, with parameter values substituted."""
+        raise NotImplementedError
+
+    def coefficient(self, speed):
+        """e(speed) for a scalar or an array of impact speeds (absolute values are taken).
+
+        Examples
+        --------
+        >>> Ma(0.4).coefficient([0.1, 1.0]).round(6).tolist()
+        [1.0, 0.858374]
+        """
+        fn = self._numpy()
+        arr = np.abs(np.asarray(speed, dtype=float))
+        out = np.broadcast_to(np.asarray(fn(arr), dtype=float), arr.shape).copy()
+        return float(out) if out.ndim == 0 else out
+
+    def _numpy(self) -> Callable:
+        cached = getattr(self, "_fn", None)
+        if cached is None:
+            cached = sp.lambdify(SPEED, self.expression(SPEED), modules="numpy")
+            self._fn = cached
+        return cached
+
+    def validate(self) -> None:
+        """Raise :class:`RestitutionError` unless 0 < e(v) <= 1 on speeds from 1e-8 to 1e4."""
+        e = np.asarray(self.coefficient(_CHECK_SPEEDS))
+        bad = ~np.isfinite(e) | (e <= 0.0) | (e > 1.0 + 1e-12)
+        if bad.any():
+            v = _CHECK_SPEEDS[bad][0]
+            raise RestitutionError(
+                f"restitution law {self!r} gives e({v:.3g}) = {e[bad][0]!r}, outside (0, 1]; "
+                "a restitution coefficient must satisfy 0 < e <= 1"
+            )
+
+    @property
+    def is_elastic(self) -> bool:
+        """True when e = 1 at every speed."""
+        return False
+
+    def elastic_below(self) -> float:
+        """Largest speed below which e = 1 (0 if none); impacts slower than this lose no energy."""
+        return 0.0
+
+    def spec(self) -> str:
+        """The command-line spelling, e.g. ``ma:vc=0.4``."""
+        args = ",".join(f"{k}={v:g}" for k, v in self.parameters.items())
+        return f"{self.name}:{args}" if args else self.name
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.parameters.items())
+        return f"{type(self).__name__}({args})"
+
+    def __eq__(self, other) -> bool:
+        return type(self) is type(other) and dict(self.parameters) == dict(other.parameters)
+
+    def __hash__(self) -> int:
+        return hash((type(self).__name__, tuple(sorted(self.parameters.items()))))
+
+
+class Elastic(RestitutionLaw):
+    """e = 1: perfectly elastic barriers.
+
+    Examples
+    --------
+    >>> Elastic().coefficient(3.0)
+    1.0
+    """
+
+    name = "elastic"
+
+    def __init__(self):
+        super().__init__()
+
+    def expression(self, speed=SPEED):
+        return sp.Integer(1)
+
+    @property
+    def is_elastic(self) -> bool:
+        return True
+
+    def elastic_below(self) -> float:
+        return float("inf")
+
+
+class Newton(RestitutionLaw):
+    """Constant (Newton) coefficient 0 < e <= 1.
+
+    Examples
+    --------
+    >>> Newton(0.5).coefficient(10.0)
+    0.5
+    """
+
+    name = "newton"
+
+    def __init__(self, e: float):
+        e = float(e)
+        if not (0.0 < e <= 1.0):
+            raise RestitutionError(f"Newton restitution e={e!r} is outside (0, 1]; choose 0 < e <= 1")
+        super().__init__(e=e)
+
+    def expression(self, speed=SPEED):
+        return sp.Float(self.parameters["e"])
+
+    @property
+    def is_elastic(self) -> bool:
+        return self.parameters["e"] == 1.0
+
+    def elastic_below(self) -> float:
+        return float("inf") if self.is_elastic else 0.0
+
+
+class Ma(RestitutionLaw):
+    """The paper's law (eqs. 3-4): e = 1 for v <= V_C, e = omega * v**(-1/6) above, omega = V_C**(1/6).
+
+    Continuous at V_C and 0 < e < 1 above it.
+
+    Examples
+    --------
+    >>> law = Ma(vc=0.4)
+    >>> round(law.coefficient(0.4), 12), round(law.coefficient(0.4 * 64), 12)
+    (1.0, 0.5)
+    """
+
+    name = "ma"
+
+    def __init__(self, vc: float):
+        vc = float(vc)
+        if not (vc > 0.0) or not np.isfinite(vc):
+            raise RestitutionError(f"Ma restitution needs a critical velocity vc > 0, got {vc!r}")
+        super().__init__(vc=vc)
+
+    @property
+    def omega(self) -> float:
+        """omega = V_C**(1/6)."""
+        return self.parameters["vc"] ** (1.0 / 6.0)
+
+    def expression(self, speed=SPEED):
+        vc = sp.Float(self.parameters["vc"])
+        return sp.Piecewise((sp.Integer(1), speed <= vc), ((vc / speed) ** sp.Rational(1, 6), True))
+
+    def elastic_below(self) -> float:
+        return self.parameters["vc"]
+
+
+class CustomRestitution(RestitutionLaw):
+    """A user law, as a sympy expression of the speed ``v`` (a string is parsed) or a numpy callable.
+
+    A callable cannot be compiled into the Monte Carlo kernels unless numba can compile it; an expression always can.
+
+    Examples
+    --------
+    >>> law = CustomRestitution("1/(1 + v/10)")
+    >>> round(law.coefficient(10.0), 12)
+    0.5
+    >>> CustomRestitution(lambda v: 0.9 + 0 * v).coefficient(1.0)
+    0.9
+    """
+
+    name = "custom"
+
+    def __init__(self, law, label: str = "custom"):
+        super().__init__()
+        self.label = label
+        if callable(law) and not isinstance(law, sp.Basic):
+            self._callable = law
+            self._expr = None
+            self._fn = lambda v: law(v)
+        else:
+            expr = _as_expr(law, "custom restitution law")
+            unknown = {s.name for s in expr.free_symbols} - {"v"}
+            if unknown:
+                raise RestitutionError(
+                    f"custom restitution law {law!r} uses {sorted(unknown)}; it may depend only on the speed v"
+                )
+            self._callable = None
+            self._expr = expr.xreplace({real_symbol("v"): SPEED})
+        self.validate()
+
+    def expression(self, speed=SPEED):
+        if self._expr is None:
+            raise RestitutionError(
+                f"the custom law {self.label!r} is a Python callable and has no symbolic form; "
+                "declare it as a sympy expression of v to use it in compiled kernels or averaging"
+            )
+        return self._expr.xreplace({SPEED: speed})
+
+    @property
+    def callable(self):
+        """The user's callable, or None for an expression law."""
+        return self._callable
+
+    def spec(self) -> str:
+        return f"custom:{self._expr}" if self._expr is not None else f"custom:{self.label}"
+
+    def __repr__(self) -> str:
+        return f"CustomRestitution({str(self._expr) if self._expr is not None else self.label!r})"
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, CustomRestitution):
+            return False
+        if self._expr is not None:
+            return other._expr is not None and sp.simplify(self._expr - other._expr) == 0
+        return self._callable is other._callable
+
+    def __hash__(self) -> int:
+        return hash(("custom", str(self._expr) if self._expr is not None else id(self._callable)))
+
+
+def parse_restitution(spec: str) -> RestitutionLaw:
+    """Read a command-line restitution spec.
+
+    ``elastic``, ``newton:e=0.8``, ``ma:vc=0.4`` or ``custom:<expression in v>``.
+
+    Examples
+    --------
+    >>> parse_restitution("ma:vc=0.4")
+    Ma(vc=0.4)
+    >>> parse_restitution("newton:e=0.7")
+    Newton(e=0.7)
+    """
+    name, _, rest = spec.partition(":")
+    name = name.strip().lower()
+    if name == "custom":
+        if not rest:
+            raise ParameterError("custom restitution needs an expression in v, e.g. custom:'1/(1+v)'")
+        return CustomRestitution(rest)
+    kwargs: dict[str, float] = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq:
+            raise ParameterError(f"restitution argument {item!r} must read NAME=VALUE, e.g. ma:vc=0.4")
+        try:
+            kwargs[key.strip()] = float(value)
+        except ValueError as exc:
+            raise ParameterError(f"restitution argument {item!r}: {value!r} is not a number") from exc
+    laws = {"elastic": Elastic, "newton": Newton, "ma": Ma}
+    if name not in laws:
+        raise ParameterError(f"unknown restitution law {name!r}; use one of elastic, newton:e=.., ma:vc=.., custom:..")
+    try:
+        return laws[name](**kwargs)
+    except TypeError as exc:
+        raise ParameterError(f"restitution {spec!r}: {exc}") from exc
