@@ -11,7 +11,10 @@ def add_model_arguments(parser: argparse.ArgumentParser, restitution_default: st
     """Add ``--model``, ``--param NAME=VALUE`` (repeatable) and ``--restitution SPEC``."""
     from models import MODELS
 
-    parser.add_argument("--model", default="duffing", choices=sorted(MODELS), help="built-in model (default duffing)")
+    parser.add_argument(
+        "--model", default="duffing", metavar="NAME|FILE.py:CLASS",
+        help=f"built-in model ({', '.join(sorted(MODELS))}) or a user class, path/to/file.py:ClassName",
+    )
     parser.add_argument(
         "--param", action="append", default=[], metavar="NAME=VALUE",
         help="set a model parameter, e.g. --param delta=1.0 (repeatable)",
@@ -42,9 +45,48 @@ def parse_params(items: list[str]) -> dict[str, float]:
     return out
 
 
+def load_model_class(spec: str):
+    """The model class for ``spec``: a registered name, or ``path/to/file.py:ClassName``.
+
+    Examples
+    --------
+    >>> load_model_class("duffing").__name__
+    'DuffingImpact'
+    """
+    import importlib.util
+    from pathlib import Path
+
+    from models import MODELS, ImpactOscillator
+
+    if spec in MODELS:
+        return MODELS[spec]
+    path, colon, cls_name = spec.rpartition(":")
+    if not colon or not path.endswith(".py"):
+        raise ParameterError(f"unknown model {spec!r}; use one of {sorted(MODELS)} or path/to/file.py:ClassName")
+    if not Path(path).is_file():
+        raise ParameterError(f"model file {path!r} does not exist")
+    module_spec = importlib.util.spec_from_file_location(f"vibro_user_model_{Path(path).stem}", path)
+    module = importlib.util.module_from_spec(module_spec)
+    try:
+        module_spec.loader.exec_module(module)
+    except Exception as exc:  # the user's file: report, do not trace back
+        raise ParameterError(f"could not import {path!r}: {type(exc).__name__}: {exc}") from exc
+    cls = getattr(module, cls_name, None)
+    if not (isinstance(cls, type) and issubclass(cls, ImpactOscillator)):
+        raise ParameterError(f"{path!r} has no ImpactOscillator subclass named {cls_name!r}")
+    return cls
+
+
 def model_from_args(args: argparse.Namespace):
-    """Build the model named by ``args.model`` with ``args.param`` and ``args.restitution``."""
-    from models import make_model, parse_restitution
+    """Build the model named by ``args.model`` with ``args.param`` and ``args.restitution``.
+
+    Parameters not given keep the model's defaults.
+    """
+    from models import parse_restitution
 
     law = parse_restitution(args.restitution) if args.restitution else None
-    return make_model(args.model, parse_params(args.param), law)
+    model = load_model_class(args.model)()
+    if law is not None:
+        model = model.with_restitution(law)
+    params = parse_params(args.param)
+    return model.with_params(**params) if params else model
