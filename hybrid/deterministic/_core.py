@@ -1,0 +1,265 @@
+"""The driver: validate the input, run a backend from transition to transition, apply resets, log, stop."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from hybrid.automaton import HybridAutomaton
+from hybrid.errors import ModelError, ParameterError
+
+from ._base import OrbitBackend
+from ._convert import finite_array, to_callable
+from ._heyoka import HeyokaBackend
+from ._result import ImpactLog, OrbitResult, Trajectory
+from ._scipy import ScipyBackend
+from ._zeno import ZenoDetector
+
+BACKENDS: dict[str, type[OrbitBackend]] = {"heyoka": HeyokaBackend, "scipy": ScipyBackend}
+"""Registered deterministic backends; ``simulate_orbit(backend=...)`` takes a name or an OrbitBackend subclass."""
+
+
+def _as_automaton(system, params):
+    """(automaton, parameter values, oscillator model or None)."""
+    from models import ImpactOscillator
+
+    if isinstance(system, ImpactOscillator):
+        model = system.with_params(**params) if params else system
+        return model.to_automaton(), dict(model.params), model
+    if isinstance(system, HybridAutomaton):
+        return system, system.resolve_parameters(params), None
+    raise ModelError(
+        f"simulate_orbit needs an ImpactOscillator model or a HybridAutomaton, got {type(system).__name__}"
+    )
+
+
+def _check_time(t0, t_end):
+    for name, value in (("t0", t0), ("t_end", t_end)):
+        try:
+            value = float(value)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"{name}={value!r} is not a number") from exc
+        if not math.isfinite(value):
+            raise ParameterError(f"{name}={value!r} must be a finite time")
+    if float(t_end) < float(t0):
+        raise ParameterError(f"t_end={t_end!r} is before t0={t0!r}; give an end time >= the start time")
+    return float(t0), float(t_end)
+
+
+def _check_inside(automaton, model, state, mode, values):
+    names = [s.name for s in automaton.states]
+    if model is not None:
+        left, right = model.barriers
+        x, v = state
+        if not (left <= x <= right):
+            raise ParameterError(
+                f"initial position x0={x:g} is outside the gap [{left:g}, {right:g}] between the barriers; "
+                "start with left <= x0 <= right"
+            )
+        if (x == right and v > 0) or (x == left and v < 0):
+            raise ParameterError(
+                f"initial state x0={x:g}, v0={v:g} sits on a barrier moving outwards; reverse the velocity"
+            )
+    for tr in automaton.transitions_from(mode):
+        if tr.direction == 0:
+            continue
+        g = to_callable([tr.guard], automaton.states, list(automaton.parameters))(state, list(values.values()))[0]
+        if tr.direction * g > 1e-12 * max(1.0, float(np.max(np.abs(state)))):
+            raise ParameterError(
+                f"initial state {dict(zip(names, state.tolist()))} is already past the guard of transition "
+                f"{tr.name!r} ({tr.guard} = {g:.6g}, fires when it crosses zero going "
+                f"{'up' if tr.direction > 0 else 'down'}); start on the other side"
+            )
+
+
+def simulate_orbit(
+    system,
+    x0,
+    t_end: float,
+    backend: str | type[OrbitBackend] = "heyoka",
+    *,
+    t0: float = 0.0,
+    mode: str | None = None,
+    params: dict | None = None,
+    rtol: float | None = None,
+    atol: float | None = None,
+    dense: bool = False,
+    min_dwell: float = 1e-9,
+    max_impacts: int = 1_000_000,
+    zeno_window: int = 6,
+    zeno_rtol: float = 1e-3,
+    **options,
+) -> OrbitResult:
+    """Simulate the deterministic (noise-free) orbit of an impact oscillator or a general hybrid automaton.
+
+    The flow of the current mode is integrated until a guard crosses zero in its declared direction; the crossing
+    is located exactly (heyoka: terminal Taylor events; scipy: root of the dense output), the reset is applied, the
+    transition is logged and the integration resumes, until ``t_end``.
+
+    Parameters
+    ----------
+    system : ImpactOscillator or HybridAutomaton
+        For a model, its noise is ignored (the flow is x' = y, y' = -g - eps h) and impacts follow its
+        restitution law.
+    x0 : sequence of float
+        Initial state (for a model: (x0, v0) with x0 inside the gap).
+    t_end : float
+        Final time (>= t0).
+    backend : {'heyoka', 'scipy'} or OrbitBackend subclass
+    t0 : float
+    mode : str, optional
+        Initial mode (the automaton's ``initial_mode`` by default).
+    params : dict, optional
+        Parameter overrides (for a model, as in ``model.with_params``).
+    rtol, atol : float, optional
+        Tolerances. heyoka: ``rtol`` is the Taylor tolerance (default machine epsilon). scipy: defaults 1e-10 and
+        rtol/100.
+    dense : bool
+        Keep the state after every step (``result.trajectory``).
+    min_dwell : float
+        Minimum time between two transitions; a shorter interval stops the run with status ``'chattering'``.
+    max_impacts : int
+        Stop with status ``'max_impacts'`` after this many transitions.
+    zeno_window, zeno_rtol : int, float
+        Zeno detection: ``zeno_window`` successive ratios of inter-impact intervals agreeing within ``zeno_rtol``
+        and below 0.99 predict an accumulation t_k + dt_k r / (1 - r); if it falls before ``t_end`` the run stops
+        with status ``'zeno'`` and ``zeno_time`` set. ``zeno_window=0`` switches detection off.
+    **options
+        Backend options (scipy: ``method='DOP853'``, ``max_step``).
+
+    Returns
+    -------
+    OrbitResult
+
+    Raises
+    ------
+    ParameterError
+        Non-finite or reversed times, a state of the wrong length, a state outside the gap or past a guard,
+        bad tolerances, unknown backend.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact, Ma
+    >>> res = simulate_orbit(DuffingImpact(c=0, D=0, restitution=Ma(0.4)), x0=(0.0, 2.2), t_end=20.0)
+    >>> res.status, res.n_impacts
+    ('ok', 11)
+    >>> df = res.impacts.to_pandas()
+    >>> bool(abs((df.H_minus - df.H_plus)[0] - (1 - df.e[0]**2) * (df.H_minus[0] - 0.55)) < 1e-12)
+    True
+    """
+    wall0 = time.perf_counter()
+    automaton, values, model = _as_automaton(system, params)
+    t0, t_end = _check_time(t0, t_end)
+    state = finite_array(x0, "the initial state x0")
+    names = [s.name for s in automaton.states]
+    if state.size != len(names):
+        raise ParameterError(f"x0 has {state.size} values but the state is {names}; give one value per state")
+    mode = automaton.initial_mode if mode is None else mode
+    automaton.mode(mode)  # unknown mode -> ModelError
+    if not (isinstance(min_dwell, (int, float)) and math.isfinite(min_dwell) and min_dwell >= 0):
+        raise ParameterError(f"min_dwell={min_dwell!r} must be a finite time >= 0")
+    if not (isinstance(max_impacts, (int, np.integer)) and max_impacts >= 0):
+        raise ParameterError(f"max_impacts={max_impacts!r} must be an integer >= 0")
+    _check_inside(automaton, model, state, mode, values)
+
+    if isinstance(backend, str):
+        if backend not in BACKENDS:
+            raise ParameterError(f"unknown backend {backend!r}; use one of {sorted(BACKENDS)}")
+        backend_cls = BACKENDS[backend]
+    elif isinstance(backend, type) and issubclass(backend, OrbitBackend):
+        backend_cls = backend
+    else:
+        raise ParameterError(f"backend must be a name in {sorted(BACKENDS)} or an OrbitBackend subclass")
+    engine = backend_cls(automaton, values, rtol=rtol, atol=atol, dense=dense, **options)
+
+    pnames = list(automaton.parameters)
+    pvalues = [values[p] for p in pnames]
+    resets = {}
+    for tr in automaton.transitions:
+        resets[tr.name] = (to_callable(tr.reset, automaton.states, pnames) if tr.symbolic_reset else tr.reset)
+    obs_names = list(automaton.observables)
+    observe = to_callable([automaton.observables[k] for k in obs_names], automaton.states, pnames) if obs_names \
+        else (lambda s, p: ())
+    zeno = ZenoDetector(zeno_window, zeno_rtol) if zeno_window else None
+
+    rows_t, rows_tr, rows_src, rows_tgt, before, after, ob_before, ob_after = [], [], [], [], [], [], [], []
+    engine.start(t0, state, mode)
+    status, message, zeno_time, n_steps = "ok", f"reached t_end={t_end:g}", None, 0
+    t_last = -math.inf
+    t = t0
+    while True:
+        step = engine.advance(t_end)
+        n_steps += step.steps
+        t, state = step.t, step.state
+        if step.failed:
+            status, message = "failed", step.failed
+            break
+        if step.fired is None:
+            break
+        tr = automaton.transitions[step.fired]
+        if tr.symbolic_reset:
+            new = np.array(resets[tr.name](state, pvalues), dtype=float)
+        else:
+            new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+        if new.shape != state.shape or not np.all(np.isfinite(new)):
+            status = "failed"
+            message = f"reset of transition {tr.name!r} at t={t:.17g} gave {new} from {state}"
+            break
+        rows_t.append(t)
+        rows_tr.append(tr.name)
+        rows_src.append(tr.source)
+        rows_tgt.append(tr.target)
+        before.append(state)
+        after.append(new)
+        ob_before.append(observe(state, pvalues))
+        ob_after.append(observe(new, pvalues))
+        state, mode = new, tr.target
+        if dense:
+            engine.samples.append((t, new.copy(), mode))
+        dt = t - t_last
+        t_last = t
+        if zeno is not None:
+            predicted = zeno.add(t)
+            if predicted is not None and predicted <= t_end:
+                status, zeno_time = "zeno", predicted
+                message = (f"Zeno: transition times accumulate geometrically (ratio {zeno.ratio:.6g}) at "
+                           f"t = {predicted:.12g}; stopped after {len(rows_t)} transitions at t = {t:.12g}")
+                break
+        if dt < min_dwell:
+            status = "chattering"
+            message = (f"two transitions {dt:.3g} apart at t={t:.12g} (< min_dwell={min_dwell:g}): chattering or "
+                       "a grazing sequence; stopped")
+            break
+        if len(rows_t) >= max_impacts:
+            status, message = "max_impacts", f"stopped after max_impacts={max_impacts} transitions at t={t:.12g}"
+            break
+        engine.restart(t, state, mode)
+
+    d = len(names)
+    log = ImpactLog(
+        t=np.array(rows_t, dtype=float), transition=np.array(rows_tr, dtype=object),
+        source=np.array(rows_src, dtype=object), target=np.array(rows_tgt, dtype=object),
+        before=np.array(before, dtype=float).reshape(-1, d), after=np.array(after, dtype=float).reshape(-1, d),
+        observables_before={k: np.array([o[i] for o in ob_before], dtype=float) for i, k in enumerate(obs_names)},
+        observables_after={k: np.array([o[i] for o in ob_after], dtype=float) for i, k in enumerate(obs_names)},
+        state_names=tuple(names), oscillator=model is not None,
+    )
+    trajectory = None
+    if dense:
+        trajectory = Trajectory(
+            t=np.array([s[0] for s in engine.samples], dtype=float),
+            y=np.array([s[1] for s in engine.samples], dtype=float).reshape(-1, d),
+            mode=np.array([s[2] for s in engine.samples], dtype=object), state_names=tuple(names),
+        )
+    settings = {"backend": engine.name, "t0": t0, "t_end": t_end, "min_dwell": min_dwell, "max_impacts": max_impacts,
+                "zeno_window": zeno_window, "zeno_rtol": zeno_rtol, "parameters": dict(values), **engine.settings()}
+    if model is not None:
+        settings["restitution"] = model.restitution.spec()
+        settings["model"] = model.name
+    return OrbitResult(
+        status=status, message=message, t=float(t), state=np.array(state, dtype=float), mode=mode, impacts=log,
+        n_steps=n_steps, n_impacts=len(rows_t), zeno_time=zeno_time, trajectory=trajectory, backend=engine.name,
+        settings=settings, compile_time=engine.compile_time, wall_time=time.perf_counter() - wall0,
+    )
