@@ -192,3 +192,19 @@ __all__ = [
     "exact_two_impact_loss", "linear_oscillator_energy_density", "ou_stationary_variance",
     "paper_two_impact_loss", "period_mpmath",
 ]
+
+
+# ----------------------------------------------------------------------------- added for issue 2 (orbits)
+
+def duffing_free_period_mp(H: float, a: float = 1.0, b: float = 0.2, dps: int = 40) -> float:
+    """Free period (eq. 8, no barriers) of the Duffing oscillator to full double precision.
+
+    The turning point A is computed in mpmath precision; with x = A sin(theta),
+    2H - 2G(x) = cos(theta)**2 * (a A**2 + b A**4 (1 + sin(theta)**2) / 2), so the integrand has no singularity.
+    ``duffing_period`` takes A in double precision, which costs ~1e-8 relative through the 1/sqrt singularity.
+    """
+    with mp.workdps(dps):
+        H, a, b = mp.mpf(H), mp.mpf(a), mp.mpf(b)
+        A = mp.sqrt((mp.sqrt(a * a + 4 * b * H) - a) / b) if b > 0 else mp.sqrt(2 * H / a)
+        f = lambda th: 1 / mp.sqrt(a + b * A * A * (1 + mp.sin(th) ** 2) / 2)  # noqa: E731
+        return float(4 * mp.quad(f, [0, mp.pi / 2]))

@@ -67,8 +67,12 @@ class OrbitBackend:
         """Integrate until ``t_end`` or the first guard crossing of the current mode."""
         raise NotImplementedError
 
-    def restart(self, t: float, state: np.ndarray, mode: str) -> None:
-        """Continue from a state just after a reset (same time), possibly in another mode."""
+    def restart(self, t: float, state: np.ndarray, mode: str, fired: int | None = None) -> None:
+        """Continue from a state just after the reset of transition ``fired`` (same time), maybe in another mode.
+
+        A guard that is zero at the restart point is not a crossing; the guard of ``fired`` must not fire again
+        because of the rounding of the event location (a cooldown).
+        """
         raise NotImplementedError
 
     def settings(self) -> dict:

@@ -235,7 +235,7 @@ def simulate_orbit(
         if len(rows_t) >= max_impacts:
             status, message = "max_impacts", f"stopped after max_impacts={max_impacts} transitions at t={t:.12g}"
             break
-        engine.restart(t, state, mode)
+        engine.restart(t, state, mode, step.fired)
 
     d = len(names)
     log = ImpactLog(

@@ -20,7 +20,7 @@ import numpy as np
 from hybrid.errors import ModelError, ParameterError
 
 from ._base import Advance, OrbitBackend
-from ._convert import automaton_fingerprint, to_heyoka
+from ._convert import automaton_fingerprint, to_callable, to_heyoka
 
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_SIZE = 32
@@ -35,11 +35,10 @@ def _compile(automaton, tol):
     if len(names) == 1:
         variables = [variables]
     symbols = dict(zip(names, variables))
-    n_par = len(automaton.parameters)
-    symbols.update({p: hy.par[i] for i, p in enumerate(automaton.parameters)})
-    mode_index = {m.name: k for k, m in enumerate(automaton.modes)}
+    index = parameter_indices(automaton)
+    symbols.update({p: hy.par[i] for p, i in index.items() if not p.startswith("mode:")})
     multi = len(automaton.modes) > 1
-    weights = [hy.par[n_par + k] for k in range(len(automaton.modes))]
+    weights = [hy.par[index[f"mode:{m.name}"]] for m in automaton.modes] if multi else []
 
     rhs = []
     for i in range(len(names)):
@@ -50,6 +49,7 @@ def _compile(automaton, tol):
         rhs.append(hy.sum(terms) if len(terms) > 1 else terms[0])
     directions = {1: hy.event_direction.positive, -1: hy.event_direction.negative, 0: hy.event_direction.any}
     events = []
+    mode_index = {m.name: k for k, m in enumerate(automaton.modes)}
     for tr in automaton.transitions:
         g = to_heyoka(tr.guard, symbols)
         if multi:
@@ -57,11 +57,31 @@ def _compile(automaton, tol):
             g = w * g + (hy.expression(1.0) - w)
         events.append(hy.t_event(g, direction=directions[tr.direction]))
     kwargs = {} if tol is None else {"tol": float(tol)}
-    n_pars_total = n_par + (len(automaton.modes) if multi else 0)
-    return hy.taylor_adaptive(
-        list(zip(variables, rhs)), [0.0] * len(names), pars=[0.0] * n_pars_total, t_events=events or None,
-        **kwargs,
-    )
+    # heyoka sizes the parameter array from the highest index it meets; parameters used only in resets
+    # get no slot (they are applied in Python)
+    return hy.taylor_adaptive(list(zip(variables, rhs)), [0.0] * len(names), t_events=events or None, **kwargs)
+
+
+def parameter_indices(automaton) -> dict:
+    """heyoka runtime-parameter index of each parameter used by a flow or a guard, then of each mode weight.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> parameter_indices(DuffingImpact().to_automaton())
+    {'a': 0, 'b': 1, 'c': 2, 'delta': 3}
+    """
+    used = set()
+    for m in automaton.modes:
+        for f in m.flow:
+            used |= {s.name for s in f.free_symbols}
+    for tr in automaton.transitions:
+        used |= {s.name for s in tr.guard.free_symbols}
+    names = [p for p in automaton.parameters if p in used]
+    index = {p: i for i, p in enumerate(names)}
+    if len(automaton.modes) > 1:
+        index.update({f"mode:{m.name}": len(names) + k for k, m in enumerate(automaton.modes)})
+    return index
 
 
 def compiled_integrator(automaton, tol=None):
@@ -113,36 +133,54 @@ class HeyokaBackend(OrbitBackend):
             raise
         except Exception as exc:  # heyoka refuses the system: say which backend works instead
             raise ModelError(f"heyoka cannot compile this automaton ({exc}); use backend='scipy'") from exc
-        self._n_par = len(automaton.parameters)
+        self._index = parameter_indices(automaton)
         self._multi = len(automaton.modes) > 1
         self._modes = [m.name for m in automaton.modes]
-        self.ta.pars[: self._n_par] = np.array([self.params[p] for p in automaton.parameters], dtype=float)
+        self._write_pars({p: self.params[p] for p in self._index if not p.startswith("mode:")})
         self.mode = automaton.initial_mode
+        pnames = list(automaton.parameters)
+        self._values = [self.params[p] for p in pnames]
+        self._guards = [to_callable([t.guard], automaton.states, pnames) for t in automaton.transitions]
+        self._active = {
+            m.name: [j for j, t in enumerate(automaton.transitions) if t.source == m.name] for m in automaton.modes
+        }
+        self._escape: set = set()
+
+    def _zero_guards(self, state, mode, skip) -> set:
+        """Transitions of ``mode`` whose guard is exactly zero at ``state`` (``skip`` is in heyoka's cooldown)."""
+        return {j for j in self._active[mode] if j != skip and self._guards[j](state, self._values)[0] == 0.0}
+
+    def _write_pars(self, values: dict) -> None:
+        pars = self.ta.pars
+        for name, value in values.items():
+            i = self._index[name]
+            if i < len(pars):  # a weight of a mode with a zero flow and no guard may have no slot
+                pars[i] = value
 
     def _set_mode(self, mode: str) -> None:
         self.mode = mode
         if self._multi:
-            w = np.zeros(len(self._modes))
-            w[self._modes.index(mode)] = 1.0
-            self.ta.pars[self._n_par:] = w
+            self._write_pars({f"mode:{m}": float(m == mode) for m in self._modes})
 
     def start(self, t0, state, mode):
         self.ta.time = float(t0)
         self.ta.state[:] = state
         self.ta.reset_cooldowns()
         self._set_mode(mode)
+        self._escape = self._zero_guards(self.ta.state, mode, None)
         if self.dense:
             self.samples.append((float(t0), np.array(state, dtype=float), mode))
 
-    def restart(self, t, state, mode):
+    def restart(self, t, state, mode, fired=None):
         self.ta.state[:] = state
         self._set_mode(mode)
+        self._escape = self._zero_guards(self.ta.state, mode, fired)
 
     def _record(self, ta) -> bool:
         self.samples.append((ta.time, ta.state.copy(), self.mode))
         return True
 
-    def advance(self, t_end):
+    def _propagate(self, t_end) -> Advance:
         import heyoka as hy
 
         out = self.ta.propagate_until(float(t_end), callback=self._record if self.dense else None)
@@ -155,6 +193,27 @@ class HeyokaBackend(OrbitBackend):
             return Advance(self.ta.time, state, -code - 1, steps)
         return Advance(self.ta.time, state, None, steps,
                        failed=f"heyoka stopped with outcome {outcome!r} at t={self.ta.time:.17g}, state={state}")
+
+    def advance(self, t_end):
+        steps = 0
+        if self._escape:
+            # heyoka misses crossings in a step whose event polynomial starts at exactly zero: leave the guard
+            # with a tiny step first, ignoring a 'crossing' at the start point itself (that is not a crossing)
+            t_start = self.ta.time
+            target = min(t_start + 1e-10 * max(1.0, abs(t_start)), t_end)
+            for _ in range(len(self._escape) + 1):
+                res = self._propagate(target)
+                steps += res.steps
+                if res.fired in self._escape and res.t == t_start:
+                    continue  # now in heyoka's cooldown
+                break
+            self._escape = set()
+            if res.fired is not None or res.failed or res.t >= t_end:
+                res.steps = steps
+                return res
+        res = self._propagate(t_end)
+        res.steps += steps
+        return res
 
     def settings(self):
         return {"rtol": self.rtol if self.rtol is not None else float(np.finfo(float).eps), "order": self.ta.order}

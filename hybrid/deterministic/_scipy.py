@@ -67,10 +67,11 @@ class ScipyBackend(OrbitBackend):
         if self.dense:
             self.samples.append((self.t, self.y.copy(), mode))
 
-    def restart(self, t, state, mode):
+    def restart(self, t, state, mode, fired=None):
         self.t = float(t)
         self.y = np.array(state, dtype=float)
         self.mode = mode
+        self._cooling = fired
 
     def _guard(self, j, y) -> float:
         return self._guards[j](y, self._values)[0]
@@ -93,6 +94,10 @@ class ScipyBackend(OrbitBackend):
             return Advance(self.t, self.y.copy(), None, 0)
         solver = self.method(fun, self.t, self.y, t_end, rtol=self.rtol, atol=self.atol, max_step=self.max_step)
         g_old = [self._guard(j, self.y) for j in active]
+        # cooldown: the event location is exact only to rounding, so the guard that just fired may sit a hair on
+        # its old side; crossings of it closer than `cool` to the restart are that rounding, not a new event
+        cooling, t_start = getattr(self, "_cooling", None), self.t
+        cool = 1e-12 * max(1.0, abs(t_start))
         while True:
             message = solver.step()
             steps += 1
@@ -105,12 +110,21 @@ class ScipyBackend(OrbitBackend):
             hits = []
             sol = None
             for k, j in enumerate(active):
+                if j == cooling and t_old == t_start and self._crossed(j, g_old[k], g_new[k]):
+                    sol = sol or solver.dense_output()
+                    t_c = t_start + cool
+                    if t_c >= t_new:
+                        continue
+                    g_old[k] = self._guard(j, sol(t_c))
+                    t_lo = t_c
+                else:
+                    t_lo = t_old
                 if self._crossed(j, g_old[k], g_new[k]):
                     sol = sol or solver.dense_output()
                     if g_new[k] == 0.0:
                         t_hit = t_new
                     else:
-                        t_hit = brentq(lambda s, j=j, sol=sol: self._guard(j, sol(s)), t_old, t_new,
+                        t_hit = brentq(lambda s, j=j, sol=sol: self._guard(j, sol(s)), t_lo, t_new,
                                        xtol=4 * _EPS, rtol=4 * _EPS)
                     hits.append((t_hit, self._priority[j], j))
             if hits:
@@ -123,6 +137,7 @@ class ScipyBackend(OrbitBackend):
             if self.dense:
                 self.samples.append((t_new, solver.y.copy(), self.mode))
             g_old = g_new
+            cooling = None
             if solver.status == "finished":
                 self.t, self.y = solver.t, solver.y.copy()
                 return Advance(self.t, self.y.copy(), None, steps)
