@@ -7,6 +7,7 @@ translated; anything else raises :class:`~hybrid.errors.ModelError` and names th
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from collections.abc import Mapping, Sequence
 
@@ -127,6 +128,12 @@ def to_callable(exprs: Sequence[sp.Expr], states: Sequence[sp.Symbol], params: S
     >>> f([2.0], [3.0])
     (-6.0, 4.0)
     """
+    return _to_callable(tuple(sp.sympify(e) for e in exprs), tuple(states), tuple(params))
+
+
+@functools.lru_cache(maxsize=256)
+def _to_callable(exprs: tuple, states: tuple, params: tuple):
+    """Cached worker of :func:`to_callable`."""
     args = [sp.Symbol(s.name) for s in states] + [sp.Symbol(p) for p in params]
     plain = [sp.sympify(e).xreplace({s: sp.Symbol(s.name) for s in sp.sympify(e).free_symbols}) for e in exprs]
     try:

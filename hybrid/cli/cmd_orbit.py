@@ -1,0 +1,158 @@
+"""``vibro orbit``: an event-exact free orbit, its impact log, and a check against eqs. 11, 13 and 14."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from hybrid.errors import ModelError, ParameterError
+
+
+def register(subparsers) -> None:
+    """Add the ``orbit`` subcommand.
+
+    Examples
+    --------
+    >>> from hybrid.cli import build_parser
+    >>> args = build_parser().parse_args(["orbit", "--v0", "2.2", "--t-end", "5"])
+    >>> args.backend, args.v0
+    ('heyoka', 2.2)
+    """
+    from .common import add_model_arguments
+
+    p = subparsers.add_parser(
+        "orbit", help="deterministic orbit with exact impacts; compare with eqs. 11, 13, 14",
+        description="Simulate the noise-free orbit (the model's noise is ignored) with impacts located exactly, "
+                    "write the impact log and compare the measured energy losses and quasi-periods with the "
+                    "paper's eq. 11 (loss per impact), eq. 13 (loss per quasi-period, 'paper' same-e reading "
+                    "and the exact two-impact loss) and eq. 14 (quasi-period).",
+    )
+    add_model_arguments(p)
+    p.add_argument("--x0", type=float, default=0.0, help="initial position, inside the gap (default 0)")
+    p.add_argument("--v0", type=float, default=2.2, help="initial velocity (default 2.2)")
+    p.add_argument("--t-end", type=float, default=60.0, dest="t_end", help="final time (default 60)")
+    p.add_argument("--backend", choices=["heyoka", "scipy"], default="heyoka")
+    p.add_argument("--rtol", type=float, default=None, help="tolerance (heyoka: machine eps; scipy: 1e-10)")
+    p.add_argument("--max-impacts", type=int, default=1_000_000, dest="max_impacts")
+    p.add_argument("--out", default=None, metavar="FILE.csv", help="write the impact log here (atomically)")
+    p.add_argument("--rows", type=int, default=6, help="table rows per comparison (default 6)")
+    p.set_defaults(func=run)
+
+
+def _rel(a: float, b: float) -> float:
+    return abs(a - b) / abs(b) if b != 0 else (0.0 if a == 0 else math.inf)
+
+
+def comparison_tables(model, df, rows: int = 6) -> tuple[str, dict]:
+    """Text tables of measured against predicted losses and quasi-periods, and the largest relative errors.
+
+    ``df`` is an impact log from :meth:`ImpactLog.to_pandas`. The returned dict holds the maximum relative
+    deviation over the whole log for each formula: ``eq11``, ``eq13_paper``, ``eq13_exact``, ``eq14``,
+    ``eq14_two_level``.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact, Ma
+    >>> from hybrid.deterministic import simulate_orbit
+    >>> m = DuffingImpact(c=0, D=0, restitution=Ma(0.4))
+    >>> text, worst = comparison_tables(m, simulate_orbit(m, (0.0, 2.2), 10.0).to_pandas())
+    >>> worst["eq11"] < 1e-10, worst["eq13_exact"] < 1e-10, worst["eq13_paper"] > 1e-2
+    (True, True, True)
+    """
+    from hybrid.deterministic import impact_loss, quasi_period, two_impact_loss
+
+    out = []
+    worst = {"eq11": 0.0, "eq13_paper": 0.0, "eq13_exact": 0.0, "eq14": 0.0, "eq14_two_level": 0.0}
+    n = len(df)
+    t, Hm, Hp, side = df.t.to_numpy(), df.H_minus.to_numpy(), df.H_plus.to_numpy(), df.barrier.to_numpy()
+
+    out.append("energy loss per impact, eq. 11: dH = (1 - e^2)(H- - G(delta))")
+    out.append(f"{'k':>4} {'t':>12} {'barrier':>7} {'H-':>12} {'dH measured':>14} {'eq. 11':>14} {'rel.dev':>9}")
+    for k in range(n):
+        pred = impact_loss(model, Hm[k])
+        meas = Hm[k] - Hp[k]
+        dev = _rel(meas, pred) if pred > 0 else abs(meas)
+        worst["eq11"] = max(worst["eq11"], dev)
+        if k < rows:
+            out.append(f"{k:>4} {t[k]:>12.6f} {side[k]:>7} {Hm[k]:>12.8f} {meas:>14.6e} {pred:>14.6e} {dev:>9.2e}")
+
+    out.append("")
+    out.append("loss per quasi-period (impacts k, k+1), eq. 13: 'paper' (1 - e^4)(H - G), "
+               "'exact' (1 - e1^2 e2^2)(H - G), e2 = e(e1 v)")
+    out.append(f"{'k':>4} {'H-':>12} {'measured':>14} {'eq.13 paper':>14} {'rel.dev':>9} {'exact 2-imp':>14} "
+               f"{'rel.dev':>9}")
+    for k in range(n - 1):
+        meas = Hm[k] - Hp[k + 1]
+        paper, exact = two_impact_loss(model, Hm[k], "paper"), two_impact_loss(model, Hm[k], "exact")
+        dp = _rel(meas, paper) if paper > 0 else abs(meas)
+        de = _rel(meas, exact) if exact > 0 else abs(meas)
+        worst["eq13_paper"] = max(worst["eq13_paper"], dp)
+        worst["eq13_exact"] = max(worst["eq13_exact"], de)
+        if k < rows:
+            out.append(f"{k:>4} {Hm[k]:>12.8f} {meas:>14.6e} {paper:>14.6e} {dp:>9.2e} {exact:>14.6e} {de:>9.2e}")
+
+    out.append("")
+    out.append("quasi-period: time from impact k to k+2 (same barrier) against eq. 14 T(H+_k) and the two-level "
+               "value (T(H+_k) + T(H+_k+1))/2")
+    out.append(f"{'k':>4} {'H+':>12} {'measured':>14} {'eq.14':>14} {'rel.dev':>9} {'two-level':>14} {'rel.dev':>9}")
+    for k in range(n - 2):
+        meas = t[k + 2] - t[k]
+        T1 = quasi_period(model, Hp[k])
+        two = 0.5 * (T1 + quasi_period(model, Hp[k + 1]))
+        d1, d2 = _rel(meas, T1), _rel(meas, two)
+        worst["eq14"] = max(worst["eq14"], d1)
+        worst["eq14_two_level"] = max(worst["eq14_two_level"], d2)
+        if k < rows:
+            out.append(f"{k:>4} {Hp[k]:>12.8f} {meas:>14.10f} {T1:>14.10f} {d1:>9.2e} {two:>14.10f} {d2:>9.2e}")
+        if k >= 4 * rows:  # each T(H) is a quadrature: the worst case over the first rows is enough
+            break
+    out.append("")
+    worst = {k: float(v) for k, v in worst.items()}
+    out.append("largest relative deviation: " + ", ".join(f"{k} {v:.2e}" for k, v in worst.items()))
+    return "\n".join(out), worst
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``vibro orbit``; return 0 on success, 1 when the orbit stopped early (Zeno, chattering, failure)."""
+    from hybrid.deterministic import quasi_period, simulate_orbit
+    from hybrid.deterministic._result import write_csv_atomically
+
+    from .common import model_from_args
+
+    if not math.isfinite(args.t_end) or args.t_end < 0:
+        raise ParameterError(f"--t-end {args.t_end!r} must be a finite time >= 0")
+    if args.rtol is not None and not (0 < args.rtol < 1):
+        raise ParameterError(f"--rtol {args.rtol!r} must lie in (0, 1)")
+    if args.rows < 0:
+        raise ParameterError(f"--rows {args.rows} must be >= 0")
+    model = model_from_args(args)
+    model.restitution.validate()
+    res = simulate_orbit(model, (args.x0, args.v0), args.t_end, backend=args.backend, rtol=args.rtol,
+                         max_impacts=args.max_impacts)
+    df = res.to_pandas()
+    params = " ".join(f"{k}={v:g}" for k, v in model.params.items())
+    print(f"vibro orbit: {model.name} {params}, restitution {model.restitution.spec()}, backend {res.backend}")
+    if model.params.get("D", 0.0) or model.substitute(model.h) != 0:
+        print("note: the noise is ignored; eqs. 11-14 assume a free orbit (h = 0), so expect deviations when h != 0")
+    print(f"status {res.status}: {res.message}; {res.n_impacts} impacts, {res.n_steps} steps, "
+          f"{res.wall_time:.3f} s (compile {res.compile_time:.3f} s)")
+    if args.out:
+        write_csv_atomically(df, args.out)
+        print(f"wrote {args.out} ({len(df)} impacts)")
+    try:
+        Gd = model.barrier_energy
+    except ModelError as exc:  # asymmetric barriers: no single impact level for eqs. 11-14
+        print(f"no comparison with eqs. 11-14: {exc}")
+        return 0 if res.status in ("ok", "max_impacts") else 1
+    H0 = float(model.energy(args.x0, args.v0))
+    print(f"G(delta) = {Gd:.12g}, H0 = {H0:.12g}")
+    if len(df) == 0:
+        if H0 < Gd:
+            print(f"no impacts: H0 < G(delta); free period (eq. 8) T(H0) = {quasi_period(model, H0):.12g}")
+        else:
+            print("no impacts before t_end")
+    else:
+        text, _ = comparison_tables(model, df, rows=args.rows)
+        print()
+        print(text)
+    return 0 if res.status in ("ok", "max_impacts") else 1
