@@ -343,9 +343,11 @@ def test_unsupported_function_for_heyoka_points_to_scipy():
 
 # ----------------------------------------------------------------------------- example
 
-def test_example_02_runs_and_checks_itself(monkeypatch):
+def test_example_02_runs_and_checks_itself(monkeypatch, tmp_path):
     path = ROOT / "examples" / "02_free_orbit_energy_loss.py"
-    monkeypatch.setattr(sys, "argv", [str(path)])
+    monkeypatch.setattr(sys, "argv", [str(path), "--outdir", str(tmp_path)])
     with pytest.raises(SystemExit) as stop:
         runpy.run_path(str(path), run_name="__main__")
     assert stop.value.code in (0, None)
+    assert (tmp_path / "02_free_orbit_energy_loss.png").stat().st_size > 10_000
+    assert len(pd.read_csv(tmp_path / "02_impacts.csv")) == 29
