@@ -1,0 +1,415 @@
+"""The ensemble runner: chunks of paths on threads or on Dask, checkpoints and resume.
+
+Paths are cut into chunks of ``chunk_paths`` paths (a number that depends on ``paths`` only, never on the threads or
+workers). Locally, chunks run on ``numba.get_num_threads()`` Python threads calling the ``nogil`` kernel. Chunk k
+draws from its own xoshiro256** stream seeded by ``SeedSequence(seed).spawn(n_chunks)[k]`` and writes its own row of
+statistics, so the numbers are bitwise the same for any number of threads, any Dask cluster, any completion order,
+and across a checkpoint and resume.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import warnings
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from hybrid.errors import ModelError, ParameterError, StepSizeError
+
+from . import _codegen, _rng
+from ._schemes import get_scheme
+from ._statistics import COUNTS, SUMS, EnsembleStatistics
+
+CHECKPOINT_FILE = "mc_checkpoint.npz"
+
+
+class StepSizeWarning(UserWarning):
+    """The step is legal but coarse: the result carries a visible discretisation bias."""
+
+
+# ---------------------------------------------------------------------------------------------------- step rule
+def speed_scale(model, h_max: float) -> float:
+    """A typical speed: sqrt(sigma**2 / (2 k)) for constant linear damping k y and additive noise, else sqrt(2 h_max).
+
+    For Example 1 this is sqrt(D / c), the standard deviation of the stationary velocity.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> round(speed_scale(DuffingImpact(), 4.0), 6)
+    1.414214
+    """
+    import sympy as sp
+
+    from models import X, Y
+
+    m = model.ito_drift
+    k = -sp.diff(m, Y)
+    s2 = model.diffusion_squared
+    if not ((k.free_symbols | s2.free_symbols) & {X, Y}) and sp.diff(m, Y, 2) == 0:
+        kv, sv = float(model.substitute(k)), float(model.substitute(s2))
+        if kv > 0 and sv > 0:
+            return math.sqrt(sv / (2 * kv))
+    return math.sqrt(2.0 * h_max)
+
+
+def check_step(model, dt: float, h_max: float = 4.0) -> dict:
+    """Apply the step-size rule; raise :class:`StepSizeError` or warn :class:`StepSizeWarning`.
+
+    Rule (v = 4 * :func:`speed_scale`, gap = right - left barrier, omega**2 = max g'(x) on the gap, or on
+    |x| <= A(h_max) without barriers):
+
+    * refuse when v * dt > gap / 2 (a fast path crosses half the gap in one step: the in-step location is then
+      exact but the force and noise are frozen over a large part of an orbit) or omega * dt > 1;
+    * warn when v * dt > gap / 10 or omega * dt > 0.2 (expect a visible bias; compare with dt / 2).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> check_step(DuffingImpact(), 1e-3)["ok"]
+    True
+    """
+    v = 4.0 * speed_scale(model, h_max)
+    left, right = model.barriers
+    if np.isfinite(left) and np.isfinite(right):
+        lo, hi = left, right
+    else:
+        amp = float(np.max(np.abs(model.turning_points(h_max))))
+        lo, hi = (left if np.isfinite(left) else -amp), (right if np.isfinite(right) else amp)
+    xs = np.linspace(lo, hi, 401)
+    gx = model.restoring(xs)
+    omega = math.sqrt(max(float(np.max(np.diff(gx) / np.diff(xs))), 0.0))
+    gap = right - left
+    info = {"speed": v, "gap": gap, "omega": omega, "v_dt_over_gap": v * dt / gap if np.isfinite(gap) else 0.0,
+            "omega_dt": omega * dt, "ok": True}
+    if v * dt > gap / 2:
+        raise StepSizeError(
+            f"dt={dt:g} is too large: a typical fast path (speed {v:.3g} = 4 x speed scale) crosses "
+            f"{v * dt / gap:.2f} of the gap {gap:.3g} in one step (limit 0.5); use dt <= {gap / (10 * v):.3g}"
+        )
+    if omega * dt > 1.0:
+        raise StepSizeError(
+            f"dt={dt:g} is too large for the stiffest oscillation (omega={omega:.3g}, omega*dt={omega * dt:.2f} > 1); "
+            f"use dt <= {0.2 / omega:.3g}"
+        )
+    if v * dt > gap / 10 or omega * dt > 0.2:
+        info["ok"] = False
+        warnings.warn(
+            f"dt={dt:g} is coarse (speed*dt/gap={v * dt / gap:.3f} > 0.1 or omega*dt={omega * dt:.3f} > 0.2): "
+            "expect a visible discretisation bias", StepSizeWarning, stacklevel=3,
+        )
+    return info
+
+
+# ---------------------------------------------------------------------------------------------------- set-up
+def _positive_int(name, value):
+    try:
+        iv = int(value)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name}={value!r} must be a positive integer") from exc
+    if iv != value or iv <= 0:
+        raise ParameterError(f"{name}={value!r} must be a positive integer")
+    return iv
+
+
+def default_chunk_paths(paths: int) -> int:
+    """Paths per chunk: 8 (the kernel interleaves 8 lanes), fewer when that would leave fewer than 8 chunks.
+
+    Examples
+    --------
+    >>> default_chunk_paths(256), default_chunk_paths(10)
+    (8, 1)
+    """
+    return max(1, min(8, paths // 8))
+
+
+def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride, chunk_paths,
+              v_bins, v_max, x0) -> dict:
+    for name, val in (("dt", dt), ("t_end", t_end), ("h_max", h_max)):
+        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+            raise ParameterError(f"{name}={val!r} must be a finite positive number")
+    if not (math.isfinite(t_burn) and t_burn >= 0):
+        raise ParameterError(f"t_burn={t_burn!r} must be >= 0")
+    if t_burn >= t_end:
+        raise ParameterError(f"t_burn={t_burn:g} must be smaller than t_end={t_end:g} (nothing would be sampled)")
+    paths = _positive_int("paths", paths)
+    bins = _positive_int("bins", bins)
+    stride = _positive_int("stride", stride)
+    v_bins = _positive_int("v_bins", v_bins)
+    chunk_paths = default_chunk_paths(paths) if chunk_paths is None else _positive_int("chunk_paths", chunk_paths)
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy % (2**63))
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError(f"seed={seed!r} must be a non-negative integer (randomness only from explicit seeds)")
+    n_total = int(round(t_end / dt))
+    n_burn = int(round(t_burn / dt))
+    n_samp = (n_total - n_burn) // stride
+    if n_samp < 1:
+        raise ParameterError(f"t_end - t_burn = {t_end - t_burn:g} holds no sample at dt={dt:g}, stride={stride}")
+    left, right = model.barriers
+    if not (left <= x0[0] <= right):
+        raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
+    if xy_bins is not None:
+        nx, ny = (_positive_int("xy_bins", b) for b in xy_bins)
+        xy_bins = [nx, ny]
+        if xy_range is None:
+            amp = float(np.max(np.abs(model.turning_points(h_max))))
+            xr = (left if np.isfinite(left) else -amp, right if np.isfinite(right) else amp)
+            ymax = math.sqrt(2.0 * h_max)
+            xy_range = [list(xr), [-ymax, ymax]]
+        else:
+            (a, b), (c, d) = xy_range
+            if not (b > a and d > c):
+                raise ParameterError(f"xy_range={xy_range!r} must be ((x_lo, x_hi), (y_lo, y_hi)) with lo < hi")
+            xy_range = [[float(a), float(b)], [float(c), float(d)]]
+    else:
+        xy_range = None
+    if v_max is None:
+        v_max = 2.0 * math.sqrt(2.0 * h_max)
+    try:
+        g_bar = float(min(model.potential(np.array([left, right])))) if model.has_barriers else float("inf")
+    except Exception:  # infinite side: the finite barrier's energy
+        g_bar = float(np.nanmin([float(model.potential(b)) if np.isfinite(b) else np.inf for b in (left, right)]))
+    return {
+        "scheme": scheme.name, "dt": float(dt), "paths": paths, "t_end": n_total * dt, "t_burn": n_burn * dt,
+        "seed": int(seed), "h_max": float(h_max), "bins": bins, "xy_bins": xy_bins, "xy_range": xy_range,
+        "stride": stride, "chunk_paths": chunk_paths, "n_chunks": -(-paths // chunk_paths), "v_bins": v_bins,
+        "v_max": float(v_max), "x0": [float(x0[0]), float(x0[1])], "n_burn": n_burn, "n_samp": n_samp,
+        "steps_per_path": n_burn + n_samp * stride, "t_sample": n_samp * stride * dt, "g_barrier": g_bar,
+        "model": model.describe(), "fingerprint": model.fingerprint(),
+    }
+
+
+class _Job:
+    """Everything a chunk needs besides its id: kernel arguments (picklable, for Dask)."""
+
+    def __init__(self, model, kern, settings):
+        s = settings
+        self.source = kern.source
+        self.name = kern.module.__name__
+        self.prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
+        self.rprm = np.array(kern.law_values, dtype=float)
+        left, right = model.barriers
+        xy = s["xy_bins"]
+        (xlo, xhi), (ylo, yhi) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
+        nx, ny = xy if xy is not None else (1, 1)
+        self.scalars = dict(
+            n_burn=s["n_burn"], n_samp=s["n_samp"], stride=s["stride"], dt=s["dt"], x0=s["x0"][0], y0=s["x0"][1],
+            wl=float(left), wr=float(right), h_scale=s["bins"] / s["h_max"], hbins=s["bins"], g_bar=s["g_barrier"],
+            xlo=float(xlo), x_scale=nx / (xhi - xlo), nx=nx, ylo=float(ylo), y_scale=ny / (yhi - ylo), ny=ny,
+            do_xy=xy is not None, v_scale=s["v_bins"] / s["v_max"], vbins=s["v_bins"],
+        )
+        self.seed = s["seed"]
+        self.n_chunks = s["n_chunks"]
+        self.paths = s["paths"]
+        self.chunk_paths = s["chunk_paths"]
+
+    def npaths(self, ids):
+        ids = np.asarray(ids, dtype=np.int64)
+        return np.minimum(self.chunk_paths, self.paths - ids * self.chunk_paths).astype(np.int64)
+
+    def run(self, ids, states, module=None):
+        """Run chunks ``ids`` (with their RNG ``states``); returns the per-chunk arrays."""
+        if module is None:
+            module, _ = _codegen.load_source(self.name, self.source)
+        sc = self.scalars
+        n = len(ids)
+        hist = np.zeros((n, sc["hbins"]), np.int64)
+        xyh = np.zeros((n, sc["ny"], sc["nx"]) if sc["do_xy"] else (n, 1, 1), np.int64)
+        vh = np.zeros((n, sc["vbins"]), np.int64)
+        cnt = np.zeros((n, len(COUNTS)), np.int64)
+        sm = np.zeros((n, len(SUMS)))
+        zx, zk, zf = _rng.ziggurat_tables()
+        module.run_chunks(
+            np.ascontiguousarray(states, dtype=np.uint64), self.npaths(ids), sc["n_burn"], sc["n_samp"], sc["stride"],
+            sc["dt"], sc["x0"], sc["y0"], self.prm, self.rprm, sc["wl"], sc["wr"], zx, zk, zf, sc["h_scale"],
+            sc["hbins"], sc["g_bar"], sc["xlo"], sc["x_scale"], sc["nx"], sc["ylo"], sc["y_scale"], sc["ny"],
+            sc["do_xy"], sc["v_scale"], sc["vbins"], hist, xyh, vh, cnt, sm,
+        )
+        return np.asarray(ids, np.int64), self.npaths(ids), hist, xyh, vh, cnt, sm
+
+
+def _remote_run(job: _Job, ids, states):
+    """Dask task: load (or generate) the kernel on the worker and run the chunks."""
+    return job.run(ids, states)
+
+
+# ---------------------------------------------------------------------------------------------------- checkpoints
+def _write_checkpoint(directory: Path, stats: EnsembleStatistics) -> None:
+    directory.mkdir(parents=True, exist_ok=True)
+    tmp = directory / f".{CHECKPOINT_FILE}.tmp{os.getpid()}.npz"
+    np.savez(tmp, **stats.to_arrays())
+    os.replace(tmp, directory / CHECKPOINT_FILE)
+
+
+_RESUME_KEYS = ("scheme", "dt", "paths", "t_end", "t_burn", "seed", "h_max", "bins", "xy_bins", "xy_range", "stride",
+                "chunk_paths", "v_bins", "v_max", "x0", "model", "fingerprint")
+
+
+def _load_checkpoint(directory: Path, settings: dict) -> EnsembleStatistics | None:
+    path = directory / CHECKPOINT_FILE
+    if not path.exists():
+        return None
+    with np.load(path) as d:
+        stats = EnsembleStatistics.from_arrays(dict(d))
+    old = json.loads(json.dumps({k: stats.settings.get(k) for k in _RESUME_KEYS}))
+    new = json.loads(json.dumps({k: settings.get(k) for k in _RESUME_KEYS}))
+    diff = [k for k in _RESUME_KEYS if old[k] != new[k]]
+    if diff:
+        raise ParameterError(
+            f"checkpoint {path} was made with other settings ({', '.join(diff)} differ); resume with the same "
+            "arguments or use another --checkpoint directory"
+        )
+    return stats
+
+
+# ---------------------------------------------------------------------------------------------------- runner
+def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0, t_burn=200.0, seed=1, h_max=4.0,
+                      bins=400, xy_bins=(80, 80), xy_range=None, stride=1, progress=False, checkpoint=None,
+                      resume=False, scheduler=None, *, chunk_paths=None, checkpoint_every=4, v_bins=200, v_max=None,
+                      x0=(0.0, 0.0), check_dt=True) -> EnsembleStatistics:
+    """Simulate an ensemble of paths of ``model`` and return streaming statistics (no paths are stored).
+
+    Parameters
+    ----------
+    model : ImpactOscillator
+    scheme : str or Scheme
+        One of :data:`SCHEMES`: ``milstein`` (default), ``splitting`` (weak order 2), ``em``, ``naive``.
+    dt, t_end, t_burn : float
+        Step, end time and burn-in (statistics start after ``t_burn``); every path starts at ``x0``.
+    paths : int
+        Number of paths; cut into chunks of ``chunk_paths`` (default :func:`default_chunk_paths`).
+    seed : int
+        Root of ``numpy.random.SeedSequence``; the same seed gives the same numbers on any threads or cluster.
+    h_max, bins : float, int
+        Histogram of H on [0, h_max].
+    xy_bins, xy_range : (nx, ny) or None, ((x_lo, x_hi), (y_lo, y_hi)) or None
+        Joint histogram of (x, y); the default range is the barriers (or the turning points at h_max) times
+        |y| <= sqrt(2 h_max). ``xy_bins=None`` skips it.
+    stride : int
+        Statistics every ``stride`` steps.
+    progress : bool
+        tqdm progress bar.
+    checkpoint : path or None
+        Directory of a checkpoint written every ``checkpoint_every`` chunks and at the end (atomic).
+    resume : bool
+        Continue from the checkpoint: finished chunks are not recomputed, none is counted twice.
+    scheduler : None, "threads", "dask", "dask=ADDRESS" or a ``distributed.Client``
+        Where chunks run: numba threads in this process (default), or Dask (a LocalCluster for "dask").
+    check_dt : bool
+        Apply :func:`check_step` (refuse or warn on coarse steps).
+
+    Returns
+    -------
+    EnsembleStatistics
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> s = simulate_ensemble(DuffingImpact(), "splitting", dt=0.01, paths=4, t_end=20.0, t_burn=5.0,
+    ...                       xy_bins=None)  # doctest: +SKIP
+    >>> s.violations  # doctest: +SKIP
+    0
+    """
+    sch = get_scheme(scheme)
+    x0 = tuple(float(v) for v in x0)
+    settings = _settings(model, sch, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride,
+                         chunk_paths, v_bins, v_max, x0)
+    if check_dt:
+        settings["step_rule"] = check_step(model, dt, h_max)
+    if resume and checkpoint is None:
+        raise ParameterError("resume=True needs a checkpoint directory")
+    checkpoint_every = _positive_int("checkpoint_every", checkpoint_every)
+    kern = _codegen.build_kernel(model, sch)
+    job = _Job(model, kern, settings)
+    states = _rng.chunk_states(settings["seed"], settings["n_chunks"])
+
+    stats = None
+    ckdir = Path(checkpoint) if checkpoint is not None else None
+    if ckdir is not None and resume:
+        stats = _load_checkpoint(ckdir, settings)
+    elif ckdir is not None and (ckdir / CHECKPOINT_FILE).exists():
+        raise ParameterError(f"{ckdir / CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
+    if stats is None:
+        stats = EnsembleStatistics.empty(settings)
+    stats.settings.update({k: v for k, v in settings.items() if k not in stats.settings})
+    stats.compile_time = kern.compile_time
+    pending = [k for k in range(settings["n_chunks"]) if k not in set(stats.chunk_ids.tolist())]
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=settings["n_chunks"], initial=stats.done_chunks, unit="chunk", desc=f"mc {sch.name}")
+    since = 0
+    t_start = time.perf_counter()
+    wall0 = stats.wall_time
+
+    def accept(result):
+        nonlocal since
+        stats.add_chunks(*result)
+        stats.wall_time = wall0 + time.perf_counter() - t_start
+        since += len(result[0])
+        if bar is not None:
+            bar.update(len(result[0]))
+        if ckdir is not None and since >= checkpoint_every:
+            _write_checkpoint(ckdir, stats)
+            since = 0
+
+    try:
+        if scheduler in (None, "threads", "local"):
+            # one chunk per call of the nogil kernel, numba.get_num_threads() calls at a time
+            with ThreadPoolExecutor(max_workers=nb.get_num_threads()) as pool:
+                runs = pool.map(lambda k: job.run(np.array([k], np.int64), states[[k]], kern.module), pending)
+                for result in runs:
+                    accept(result)
+        else:
+            _run_dask(job, pending, states, scheduler, accept)
+    finally:
+        if bar is not None:
+            bar.close()
+    stats.wall_time = wall0 + time.perf_counter() - t_start
+    if ckdir is not None:
+        _write_checkpoint(ckdir, stats)
+    bad = stats.total("nonfinite")
+    if bad:
+        raise ModelError(f"{bad} samples had a non-finite energy: the paths diverged; reduce dt or check the model")
+    return stats
+
+
+def _run_dask(job, pending, states, scheduler, accept) -> None:
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:  # pragma: no cover
+        raise ParameterError("scheduler='dask' needs dask.distributed: pip install 'dask[distributed]'") from exc
+    own = []
+    if isinstance(scheduler, str):
+        name, _, address = scheduler.partition("=")
+        if name != "dask":
+            raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask or dask=ADDRESS")
+        if address:
+            client = Client(address)
+        else:
+            cluster = LocalCluster(n_workers=min(2, os.cpu_count() or 1), threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            own.append(cluster)
+            client = Client(cluster)
+        own.insert(0, client)
+    else:
+        client = scheduler
+    try:
+        job_f = client.scatter(job, broadcast=True)
+        futures = [client.submit(_remote_run, job_f, np.array([k]), states[[k]], pure=False, retries=3,
+                                 key=f"vibro-mc-{job.name}-{job.seed}-{k}-{os.getpid()}-{time.time_ns()}")
+                   for k in pending]
+        for fut in as_completed(futures):
+            accept(fut.result())
+    finally:
+        for obj in own:
+            obj.close()

@@ -1,0 +1,364 @@
+"""Streaming, mergeable ensemble statistics with batch-means confidence intervals.
+
+Each chunk of paths returns integer histograms and one row of integer counts and float sums. Histograms add as
+integers; the per-chunk rows are kept (small: one row per chunk), so that every estimate is a ratio of sums over
+chunks computed with ``math.fsum`` (exactly rounded, hence independent of the order in which chunks finished) and
+its confidence interval comes from the spread of the chunk ratios (batch means, chunks being independent).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import stats as _st
+
+from hybrid.errors import ParameterError
+
+# columns of the per-chunk count table
+COUNTS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out", "v_over", "violations", "stuck",
+          "nonfinite")
+# columns of the per-chunk sum table
+SUMS = ("H", "x2", "y2", "impact_speed")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A Monte Carlo estimate: ``value`` and ``ci``, the half-width of a 95 % batch-means interval.
+
+    Examples
+    --------
+    >>> e = Estimate(1.0, 0.1, 32)
+    >>> e.covers(1.05), float(e)
+    (True, 1.0)
+    """
+
+    value: float
+    ci: float
+    batches: int = 0
+
+    def covers(self, exact: float, bias: float = 0.0) -> bool:
+        """True when ``|value - exact| <= ci + bias``."""
+        return abs(self.value - exact) <= self.ci + bias
+
+    def __float__(self) -> float:
+        return float(self.value)
+
+    def __format__(self, spec: str) -> str:
+        spec = spec or ".6g"
+        return f"{self.value:{spec}} ± {self.ci:{spec}}"
+
+    def __str__(self) -> str:
+        return format(self, "")
+
+
+def ratio_estimate(num: np.ndarray, den: np.ndarray, level: float = 0.95) -> Estimate:
+    """Sum(num) / sum(den) with a batch-means interval from the per-batch ratios (delta method, t quantile).
+
+    Examples
+    --------
+    >>> e = ratio_estimate(np.array([1.0, 3.0]), np.array([1.0, 1.0]))
+    >>> e.value, round(e.ci, 3)
+    (2.0, 12.706)
+    """
+    num = np.asarray(num, dtype=float)
+    den = np.asarray(den, dtype=float)
+    total = math.fsum(den)
+    if total == 0:
+        return Estimate(float("nan"), float("nan"), len(num))
+    value = math.fsum(num) / total
+    n = len(num)
+    if n < 2:
+        return Estimate(value, float("inf"), n)
+    resid = num - value * den
+    var = n / (n - 1) * math.fsum(resid * resid) / (total * total)
+    return Estimate(value, float(_st.t.ppf(0.5 + level / 2, n - 1) * math.sqrt(var)), n)
+
+
+class EnsembleStatistics:
+    """Histograms and moments of an ensemble; chunks merge exactly.
+
+    Attributes
+    ----------
+    h_edges, h_counts : arrays
+        Histogram of H on [0, h_max] (``bins`` bins), sampled every ``stride`` steps after burn-in.
+    xy_edges, xy_counts : (x_edges, y_edges), array (ny, nx) or None
+        Joint histogram of (x, y); rows are y, columns x.
+    v_edges, v_counts : arrays
+        Histogram of impact speeds |y-| (every impact after burn-in).
+    chunk_ids, chunk_counts, chunk_sums : arrays
+        One row per finished chunk (columns :data:`COUNTS`, :data:`SUMS`).
+    path_steps, wall_time, compile_time, seed, settings
+
+    Examples
+    --------
+    >>> s = EnsembleStatistics.empty({"h_max": 4.0, "bins": 4, "xy_bins": None, "v_max": 2.0, "v_bins": 2,
+    ...                               "seed": 1, "t_sample": 1.0, "chunk_paths": 1})
+    >>> s.h_counts.tolist(), s.done_chunks
+    ([0, 0, 0, 0], 0)
+    """
+
+    def __init__(self, settings, h_counts, xy_counts, v_counts, chunk_ids, chunk_paths, chunk_counts, chunk_sums,
+                 wall_time=0.0, compile_time=float("nan")):
+        self.settings = dict(settings)
+        self.h_counts = np.asarray(h_counts, dtype=np.int64)
+        self.xy_counts = None if xy_counts is None else np.asarray(xy_counts, dtype=np.int64)
+        self.v_counts = np.asarray(v_counts, dtype=np.int64)
+        self.chunk_ids = np.asarray(chunk_ids, dtype=np.int64)
+        self.chunk_paths = np.asarray(chunk_paths, dtype=np.int64)
+        self.chunk_counts = np.asarray(chunk_counts, dtype=np.int64).reshape(-1, len(COUNTS))
+        self.chunk_sums = np.asarray(chunk_sums, dtype=float).reshape(-1, len(SUMS))
+        self.wall_time = float(wall_time)
+        self.compile_time = float(compile_time)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def empty(cls, settings: dict) -> EnsembleStatistics:
+        """No chunks yet, histograms sized by ``settings``."""
+        xy = settings.get("xy_bins")
+        return cls(settings, np.zeros(settings["bins"], np.int64),
+                   None if xy is None else np.zeros((xy[1], xy[0]), np.int64),
+                   np.zeros(settings["v_bins"], np.int64), [], [], np.zeros((0, len(COUNTS))), np.zeros((0, len(SUMS))))
+
+    def add_chunks(self, ids, npaths, hist, xyh, vh, cnt, sm) -> None:
+        """Add finished chunks (their rows from the kernel); a chunk id already present is refused."""
+        ids = np.asarray(ids, dtype=np.int64)
+        if np.intersect1d(ids, self.chunk_ids).size or len(np.unique(ids)) != len(ids):
+            raise ParameterError(f"chunks {np.intersect1d(ids, self.chunk_ids).tolist()} would be counted twice")
+        self.h_counts += hist.sum(axis=0)
+        if self.xy_counts is not None:
+            self.xy_counts += xyh.sum(axis=0)
+        self.v_counts += vh.sum(axis=0)
+        self.chunk_ids = np.concatenate([self.chunk_ids, ids])
+        self.chunk_paths = np.concatenate([self.chunk_paths, np.asarray(npaths, dtype=np.int64)])
+        self.chunk_counts = np.vstack([self.chunk_counts, cnt])
+        self.chunk_sums = np.vstack([self.chunk_sums, sm])
+        order = np.argsort(self.chunk_ids, kind="stable")  # a canonical order, whatever finished first
+        self.chunk_ids, self.chunk_paths = self.chunk_ids[order], self.chunk_paths[order]
+        self.chunk_counts, self.chunk_sums = self.chunk_counts[order], self.chunk_sums[order]
+
+    def merge(self, other: EnsembleStatistics) -> EnsembleStatistics:
+        """A new object with both ensembles (same histogram edges and step; disjoint chunks or another seed).
+
+        Examples
+        --------
+        >>> a = EnsembleStatistics.empty({"h_max": 4.0, "bins": 4, "xy_bins": None, "v_max": 2.0, "v_bins": 2,
+        ...                               "seed": 1, "t_sample": 1.0, "chunk_paths": 1})
+        >>> a.merge(a).done_chunks
+        0
+        """
+        for key in ("h_max", "bins", "xy_bins", "xy_range", "v_max", "v_bins", "t_sample", "dt", "scheme", "stride"):
+            if self.settings.get(key) != other.settings.get(key):
+                raise ParameterError(
+                    f"cannot merge ensembles with different {key}: {self.settings.get(key)!r} vs "
+                    f"{other.settings.get(key)!r}"
+                )
+        out = EnsembleStatistics(self.settings, self.h_counts.copy(),
+                                 None if self.xy_counts is None else self.xy_counts.copy(), self.v_counts.copy(),
+                                 self.chunk_ids, self.chunk_paths, self.chunk_counts, self.chunk_sums,
+                                 self.wall_time + other.wall_time, self.compile_time)
+        ids = other.chunk_ids
+        if other.settings.get("seed") != self.settings.get("seed"):
+            ids = ids + (int(self.chunk_ids.max()) + 1 if len(self.chunk_ids) else 0)  # another seed: new batches
+            out.settings["seed"] = f"{self.settings.get('seed')}+{other.settings.get('seed')}"
+        out.add_chunks(ids, other.chunk_paths, other.h_counts[None], None if other.xy_counts is None
+                       else other.xy_counts[None], other.v_counts[None], other.chunk_counts, other.chunk_sums)
+        out.settings["paths"] = int(out.chunk_paths.sum())
+        return out
+
+    # ------------------------------------------------------------------ raw totals
+    @property
+    def done_chunks(self) -> int:
+        """Number of finished chunks."""
+        return len(self.chunk_ids)
+
+    def total(self, name: str) -> int:
+        """Total of a count column (see :data:`COUNTS`), e.g. ``stats.total('violations')``."""
+        return int(self.chunk_counts[:, COUNTS.index(name)].sum())
+
+    @property
+    def violations(self) -> int:
+        """Steps that ended with x outside the barriers (must be 0 for every scheme except a broken one)."""
+        return self.total("violations")
+
+    @property
+    def seed(self):
+        return self.settings.get("seed")
+
+    @property
+    def paths(self) -> int:
+        """Paths in the finished chunks."""
+        return int(self.chunk_paths.sum())
+
+    @property
+    def path_steps(self) -> int:
+        """Steps taken by all finished paths (burn-in included)."""
+        return self.paths * int(self.settings.get("steps_per_path", 0))
+
+    @property
+    def throughput(self) -> float:
+        """Path-steps per second of wall time (compilation excluded)."""
+        return self.path_steps / self.wall_time if self.wall_time > 0 else float("nan")
+
+    # ------------------------------------------------------------------ histograms
+    @property
+    def h_edges(self) -> np.ndarray:
+        return np.linspace(0.0, self.settings["h_max"], self.settings["bins"] + 1)
+
+    def h_density(self) -> np.ndarray:
+        """p(H) on the bins, normalised over [0, h_max]."""
+        n = self.h_counts.sum()
+        return self.h_counts / (n * np.diff(self.h_edges)) if n else np.zeros(len(self.h_counts))
+
+    @property
+    def xy_edges(self):
+        if self.xy_counts is None:
+            return None
+        (x0, x1), (y0, y1) = self.settings["xy_range"]
+        nx, ny = self.settings["xy_bins"]
+        return np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+
+    def xy_density(self) -> np.ndarray | None:
+        """p(x, y), shape (ny, nx), normalised over the histogram range."""
+        if self.xy_counts is None:
+            return None
+        xe, ye = self.xy_edges
+        n = self.xy_counts.sum()
+        area = np.outer(np.diff(ye), np.diff(xe))
+        return self.xy_counts / (n * area) if n else np.zeros_like(area)
+
+    @property
+    def v_edges(self) -> np.ndarray:
+        return np.linspace(0.0, self.settings["v_max"], self.settings["v_bins"] + 1)
+
+    # ------------------------------------------------------------------ estimates
+    def _col(self, name):
+        return self.chunk_counts[:, COUNTS.index(name)].astype(float)
+
+    def _sum(self, name):
+        return self.chunk_sums[:, SUMS.index(name)]
+
+    @property
+    def mean_energy(self) -> Estimate:
+        """E[H]."""
+        return ratio_estimate(self._sum("H"), self._col("samples"))
+
+    @property
+    def mean_x2(self) -> Estimate:
+        """E[x**2]."""
+        return ratio_estimate(self._sum("x2"), self._col("samples"))
+
+    @property
+    def mean_y2(self) -> Estimate:
+        """E[y**2]."""
+        return ratio_estimate(self._sum("y2"), self._col("samples"))
+
+    @property
+    def prob_below_barrier(self) -> Estimate:
+        """P(H < G(delta)) (G at the lower barrier energy when the barriers are asymmetric)."""
+        return ratio_estimate(self._col("below"), self._col("samples"))
+
+    def _path_time(self):
+        return self.chunk_paths * float(self.settings["t_sample"])
+
+    @property
+    def impact_rate(self) -> Estimate:
+        """Impacts (both walls) per path per unit time, after burn-in."""
+        return ratio_estimate(self._col("impacts_left") + self._col("impacts_right"), self._path_time())
+
+    @property
+    def impact_rate_left(self) -> Estimate:
+        """Impacts on the left wall per unit time."""
+        return ratio_estimate(self._col("impacts_left"), self._path_time())
+
+    @property
+    def impact_rate_right(self) -> Estimate:
+        """Impacts on the right wall per unit time."""
+        return ratio_estimate(self._col("impacts_right"), self._path_time())
+
+    @property
+    def mean_impact_speed(self) -> Estimate:
+        """E[|y-|] over impacts."""
+        return ratio_estimate(self._sum("impact_speed"), self._col("impacts_left") + self._col("impacts_right"))
+
+    @property
+    def impacts(self) -> int:
+        """Number of impacts after burn-in."""
+        return self.total("impacts_left") + self.total("impacts_right")
+
+    # ------------------------------------------------------------------ output
+    def to_pandas(self):
+        """The H histogram as a DataFrame with columns H_lo, H_hi, count, density."""
+        import pandas as pd
+
+        e = self.h_edges
+        return pd.DataFrame({"H_lo": e[:-1], "H_hi": e[1:], "count": self.h_counts, "density": self.h_density()})
+
+    def to_csv(self, path) -> Path:
+        """Write :meth:`to_pandas` atomically (full float precision)."""
+        return atomic_write_text(path, self.to_pandas().to_csv(index=False, float_format="%.17g"))
+
+    def joint_to_pandas(self):
+        """The (x, y) histogram in long form: x_lo, x_hi, y_lo, y_hi, count, density."""
+        import pandas as pd
+
+        if self.xy_counts is None:
+            raise ParameterError("no joint histogram was collected (xy_bins=None)")
+        xe, ye = self.xy_edges
+        ny, nx = self.xy_counts.shape
+        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
+        return pd.DataFrame({
+            "x_lo": xe[ix.ravel()], "x_hi": xe[ix.ravel() + 1], "y_lo": ye[iy.ravel()], "y_hi": ye[iy.ravel() + 1],
+            "count": self.xy_counts.ravel(), "density": self.xy_density().ravel(),
+        })
+
+    def summary(self) -> dict:
+        """Main figures as a JSON-friendly dict."""
+        out = {"path_steps": self.path_steps, "wall_time": self.wall_time, "compile_time": self.compile_time,
+               "Mpath_steps_per_s": self.throughput / 1e6, "impacts": self.impacts, "violations": self.violations}
+        for name in ("mean_energy", "mean_x2", "mean_y2", "prob_below_barrier", "impact_rate"):
+            e = getattr(self, name)
+            out[name] = {"value": e.value, "ci": e.ci}
+        return out
+
+    # ------------------------------------------------------------------ checkpoint form
+    def to_arrays(self) -> dict:
+        """Every field as numpy arrays (for the checkpoint file)."""
+        d = {"settings": np.array(json.dumps(self.settings, sort_keys=True)), "h_counts": self.h_counts,
+             "v_counts": self.v_counts, "chunk_ids": self.chunk_ids, "chunk_paths": self.chunk_paths,
+             "chunk_counts": self.chunk_counts, "chunk_sums": self.chunk_sums,
+             "times": np.array([self.wall_time, self.compile_time])}
+        if self.xy_counts is not None:
+            d["xy_counts"] = self.xy_counts
+        return d
+
+    @classmethod
+    def from_arrays(cls, d) -> EnsembleStatistics:
+        settings = json.loads(str(d["settings"]))
+        return cls(settings, d["h_counts"], d["xy_counts"] if "xy_counts" in d else None, d["v_counts"],
+                   d["chunk_ids"], d["chunk_paths"], d["chunk_counts"], d["chunk_sums"], *d["times"])
+
+    def __repr__(self) -> str:
+        return (f"EnsembleStatistics(scheme={self.settings.get('scheme')!r}, dt={self.settings.get('dt')}, "
+                f"paths={self.paths}, E[H]={self.mean_energy}, impacts={self.impacts})")
+
+
+def atomic_write_text(path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file and ``os.replace`` (readers never see half a file).
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> p = atomic_write_text(os.path.join(tempfile.mkdtemp(), "a.txt"), "hi")
+    >>> p.read_text()
+    'hi'
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return path
