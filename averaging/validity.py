@@ -1,0 +1,421 @@
+"""Validity and failure maps: where each averaging method, Monte Carlo scheme and orbit backend stops working.
+
+``vibro bench validity --out-dir DIR [--quick]`` calls :func:`validity_maps`, which writes
+
+* ``averaging_<grid>.csv`` / ``.png`` over the grids (c, D), (V_C, delta) and constant e: the L1 distance of each
+  averaging method (paper, exact-two-impact, jump) from Monte Carlo, with the cells where the quasi-conservative
+  assumption breaks hatched (damping work per cycle over H at the 90th-percentile energy above
+  :data:`averaging.selection.MAX_DAMPING_RATIO`, or impact loss per quasi-period above ``MAX_IMPACT_RATIO``);
+  the same rows carry the loss ratios r_imp and r_damp, from which :func:`fit_error_model` fits the error model
+  of :mod:`averaging.selection`;
+* ``mc_failures.csv`` / ``.png``: Monte Carlo L1 error against the elastic closed form over dt times the
+  speed scale over the gap (dt against the barrier-crossing time), with what the step rule said (ok / warned /
+  refused), for each scheme, and the stiff-potential refusal;
+* ``orbit_failures.csv``: orbit statuses for Zeno (a force pushing into a wall with e < 1), chattering and grazing.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .selection import (
+    L1_BINS,
+    MAX_DAMPING_RATIO,
+    MAX_IMPACT_RATIO,
+    bin_masses,
+    diagnose,
+    l1_between_histograms,
+    pick_scheme,
+    rebin_counts,
+)
+
+AVERAGING_METHODS = ("paper", "exact-two-impact", "jump")
+
+
+def _grids(quick: bool) -> dict:
+    """name -> (x label, x values, y label, y values, model factory(x, y))."""
+    from models import DuffingImpact, Ma, Newton
+
+    if quick:
+        cs, Ds = [0.025, 0.1, 0.4], [0.01, 0.05, 0.2]
+        vcs, deltas = [0.1, 0.4, 1.2], [0.6, 1.0, 1.6]
+        es, Des = [0.5, 0.8, 0.95], [0.02, 0.1]
+    else:
+        cs, Ds = [0.0125, 0.025, 0.05, 0.1, 0.2, 0.4], [0.01, 0.025, 0.05, 0.1, 0.2]
+        vcs, deltas = [0.05, 0.1, 0.2, 0.4, 0.8, 1.6], [0.6, 0.8, 1.0, 1.3, 1.6]
+        es, Des = [0.3, 0.5, 0.7, 0.8, 0.9, 0.95], [0.01, 0.05, 0.2]
+    return {
+        "c_D": ("c", cs, "D", Ds, lambda c, D: DuffingImpact(c=c, D=D)),
+        "vc_delta": ("V_C", vcs, "delta", deltas, lambda vc, d: DuffingImpact(restitution=Ma(vc), delta=d)),
+        "newton_e": ("e", es, "D", Des, lambda e, D: DuffingImpact(restitution=Newton(e), D=D)),
+    }
+
+
+def _mc_settings(model, diag, quick: bool):
+    """Reference Monte Carlo settings: enough relaxation times for an L1 noise of about 0.01."""
+    from .selection import _linear_damping_constant
+
+    c = _linear_damping_constant(model) or 0.05
+    tau = 1.0 / max(c, 1e-3)  # energy relaxation time of the linear damping
+    paths = 128
+    t_sample = min((600.0 if quick else 1500.0) * tau, 24000.0 if quick else 60000.0)
+    return dict(dt=0.01, paths=paths, t_end=t_sample + 5 * tau, t_burn=5 * tau)
+
+
+def averaging_map(name: str, quick: bool = True, seed: int = 3, progress=print):
+    """One row per (grid cell): L1 of each averaging method from MC, MC noise, loss ratios, wall times."""
+    import pandas as pd
+
+    from averaging import stationary_density
+    from hybrid.stochastic import simulate_ensemble
+
+    xl, xs, yl, ys, make = _grids(quick)[name]
+    rows = []
+    for yv in ys:
+        for xv in xs:
+            model = make(xv, yv)
+            diag = diagnose(model)
+            h_max = diag.h_max
+            edges = np.linspace(0.0, h_max, L1_BINS + 1)
+            s = _mc_settings(model, diag, quick)
+            scheme = pick_scheme(model)
+            kw = dict(scheme=scheme, dt=s["dt"], paths=s["paths"] // 2, t_end=s["t_end"], t_burn=s["t_burn"],
+                      h_max=h_max, bins=L1_BINS * 10, xy_bins=None)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                a = simulate_ensemble(model, seed=seed, **kw)
+                b = simulate_ensemble(model, seed=seed + 1, **kw)
+            ma, mb = rebin_counts(a.h_counts, L1_BINS), rebin_counts(b.h_counts, L1_BINS)
+            noise = l1_between_histograms(ma, mb) / 2.0
+            ref = (ma + mb) / (ma + mb).sum()
+            row = {xl: xv, yl: yv, "mc_noise": noise, "mc_wall": a.wall_time + b.wall_time, "h_max": h_max,
+                   "r_imp": diag.r_imp, "r_damp": diag.r_damp, "r_damp_p90": diag.r_damp_p90,
+                   "r_imp_p90": diag.r_imp_p90, "tail": diag.tail_impact_speed,
+                   "quasi_conservative": bool(diag.r_damp_p90 <= MAX_DAMPING_RATIO
+                                              and diag.r_imp_p90 <= MAX_IMPACT_RATIO)}
+            for method in AVERAGING_METHODS:
+                t0 = time.perf_counter()
+                try:
+                    sd = stationary_density(model, method=method, h_max=h_max, points=1000)
+                    row[f"l1_{method}"] = float(np.abs(bin_masses(sd.H, sd.p, edges) - ref).sum())
+                except ValueError as exc:  # a VibroError: reported, not hidden
+                    row[f"l1_{method}"] = np.nan
+                    row[f"error_{method}"] = str(exc)
+                row[f"wall_{method}"] = time.perf_counter() - t0
+            rows.append(row)
+            progress(f"  {name}: {xl}={xv:g} {yl}={yv:g} paper={row['l1_paper']:.3f} "
+                     f"jump={row['l1_jump']:.3f} noise={noise:.3f} r_imp={diag.r_imp:.3f} "
+                     f"r_damp90={diag.r_damp_p90:.2f} mc {row['mc_wall']:.1f}s")
+    df = pd.DataFrame(rows)
+    df.attrs.update(x=xl, y=yl, grid=name)
+    return df
+
+
+def plot_averaging_map(df, path, x: str, y: str, title: str = ""):
+    """Heatmaps of L1(method, MC) over the grid; hatched cells: quasi-conservative assumption broken."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    xs = sorted(df[x].unique())
+    ys = sorted(df[y].unique())
+    fig, axes = plt.subplots(1, len(AVERAGING_METHODS), figsize=(4.2 * len(AVERAGING_METHODS), 3.8), sharey=True)
+    norm = LogNorm(vmin=3e-3, vmax=0.5)
+    for ax, method in zip(axes, AVERAGING_METHODS):
+        Z = np.full((len(ys), len(xs)), np.nan)
+        bad = np.zeros_like(Z, dtype=bool)
+        for _, r in df.iterrows():
+            i, j = ys.index(r[y]), xs.index(r[x])
+            Z[i, j] = r[f"l1_{method}"]
+            bad[i, j] = not r["quasi_conservative"]
+        im = ax.imshow(Z, origin="lower", cmap="viridis", norm=norm, aspect="auto")
+        for i in range(len(ys)):
+            for j in range(len(xs)):
+                txt = "err" if np.isnan(Z[i, j]) else f"{Z[i, j]:.3f}"
+                ax.text(j, i, txt, ha="center", va="center", fontsize=7,
+                        color="white" if (np.isnan(Z[i, j]) or Z[i, j] < 0.03) else "black")
+                if bad[i, j]:
+                    ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///", ec="red", lw=0))
+        ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
+        ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys])
+        ax.set_xlabel(x)
+        ax.set_title(method, fontsize=10)
+    axes[0].set_ylabel(y)
+    fig.colorbar(im, ax=list(axes), shrink=0.8, label="L1 of p(H) vs MC")
+    fig.suptitle(title + "  (red hatch: not quasi-conservative, averaging refused)", fontsize=9)
+    fig.savefig(path, dpi=75, bbox_inches="tight")
+    plt.close(fig)
+
+
+def fit_error_model(frames, quantile: float = 0.9) -> dict:
+    """Fit L1(method, MC) ~ floor + slope * r_imp on the quasi-conservative cells (linear damping only).
+
+    The slope is the ``quantile`` of (L1 - noise - floor) / r_imp over the cells, so that the prediction bounds
+    most calibration cells from above (a chooser must not be optimistic).
+    """
+    import pandas as pd
+
+    df = pd.concat(frames, ignore_index=True)
+    df = df[df.quasi_conservative]
+    out = {}
+    for method in AVERAGING_METHODS:
+        col = df[f"l1_{method}"]
+        ok = col.notna() & (df.r_imp > 1e-4)
+        floor = float(np.median(df.mc_noise))
+        excess = (col[ok] - floor).clip(lower=0.0) / df.r_imp[ok]
+        out[method] = {"slope": float(np.quantile(excess, quantile)) if len(excess) else math.nan,
+                       "floor": floor, "cells": int(ok.sum())}
+    return out
+
+
+# ----------------------------------------------------------------------------- Monte Carlo failures
+
+def mc_failure_map(quick: bool = True, seed: int = 9, progress=print):
+    """L1 of p(H) against the elastic closed form over dt * speed / gap for each scheme, with the step-rule verdict.
+
+    The model is elastic Duffing (c = 0.1, D = 0.1) at several gaps: dt is measured against the barrier-crossing
+    time gap / speed. Also records the stiff-potential refusal (a = 1e4).
+    """
+    import pandas as pd
+
+    from hybrid.errors import StepSizeError
+    from hybrid.stochastic import StepSizeWarning, check_step, simulate_ensemble, speed_scale
+    from models import DuffingImpact, Elastic
+
+    from .workprecision import ElasticOracle
+
+    rows = []
+    deltas = [0.25, 1.0] if quick else [0.15, 0.25, 0.5, 1.0]
+    dts = [0.005, 0.02, 0.05, 0.1, 0.2] if quick else [0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.4]
+    for delta in deltas:
+        model = DuffingImpact(restitution=Elastic(), c=0.1, D=0.1, delta=delta)
+        oracle = ElasticOracle.for_model(model)
+        h_max = 14.0 / oracle.beta
+        exact = oracle.bin_masses(np.linspace(0.0, h_max, L1_BINS + 1))
+        v = 4.0 * speed_scale(model, h_max)
+        for scheme in ("naive", "em", "milstein", "splitting"):
+            for dt in dts:
+                verdict, l1, wall = "ok", np.nan, np.nan
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    try:
+                        check_step(model, dt, h_max)
+                        stats = simulate_ensemble(model, scheme, dt=dt, paths=64, t_end=1100.0, t_burn=100.0,
+                                                  h_max=h_max, bins=L1_BINS * 10, xy_bins=None, seed=seed,
+                                                  check_dt=False)
+                        l1 = l1_between_histograms(rebin_counts(stats.h_counts, L1_BINS), exact)
+                        wall = stats.wall_time
+                    except StepSizeError:
+                        verdict = "refused"
+                    if verdict == "ok" and any(issubclass(w.category, StepSizeWarning) for w in caught):
+                        verdict = "warned"
+                rows.append(dict(method=scheme, delta=delta, dt=dt, crossing_ratio=v * dt / (2 * delta),
+                                 verdict=verdict, l1=l1, wall_time=wall))
+                progress(f"  mc-failure {scheme:9s} delta={delta:g} dt={dt:g} v*dt/gap={v * dt / (2 * delta):.3f} "
+                         f"{verdict:7s} L1={l1:.3f}")
+    stiff = DuffingImpact(a=1e4)
+    try:
+        check_step(stiff, 0.01, 4.0)
+        stiff_verdict = "ok"
+    except StepSizeError as exc:
+        stiff_verdict = f"refused: {exc}"
+    df = pd.DataFrame(rows)
+    df.attrs["stiff"] = stiff_verdict
+    return df
+
+
+def plot_mc_failures(df, path):
+    """L1 against dt*speed/gap; markers show what the step rule said."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    markers = {"ok": "o", "warned": "^", "refused": "x"}
+    for scheme, g in df.groupby("method"):
+        g = g.sort_values("crossing_ratio")
+        run = g[g.verdict != "refused"]
+        (line,) = ax.loglog(run.crossing_ratio, run.l1, lw=0.8, alpha=0.6, label=scheme)
+        for verdict, m in markers.items():
+            sel = g[g.verdict == verdict]
+            if len(sel):
+                yv = sel.l1.fillna(1.0) if verdict == "refused" else sel.l1
+                ax.scatter(sel.crossing_ratio, yv, marker=m, color=line.get_color(), s=22)
+    ax.axvline(0.1, color="orange", ls="--", lw=1, label="warn (v dt / gap = 0.1)")
+    ax.axvline(0.5, color="red", ls="--", lw=1, label="refuse (0.5), x at L1=1")
+    ax.set_xlabel("dt × (4 × speed scale) / gap   (dt over the barrier-crossing time)")
+    ax.set_ylabel("L1 of p(H) vs exact (elastic)")
+    ax.set_title("Monte Carlo: where dt fails (o ok, ^ warned, x refused)", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- orbit failures
+
+def orbit_failures(progress=print):
+    """Statuses reported by ``simulate_orbit`` in the classic failure modes (Zeno, chattering, grazing)."""
+    import pandas as pd
+
+    from hybrid.deterministic import simulate_orbit
+    from models import DuffingImpact, ImpactOscillator, Newton
+
+    rows = []
+    # a constant force pushing into the right wall: inelastic collapse, impacts accumulate (Zeno)
+    push = ImpactOscillator("x - 2", 0, parameters={"D": 0.0, "delta": 1.0}, restitution=Newton(0.5), name="push")
+    for backend in ("heyoka", "scipy"):
+        for case, kw in (("zeno", {}), ("chattering (zeno detection off)", {"zeno_window": 0, "min_dwell": 1e-6})):
+            t0 = time.perf_counter()
+            res = simulate_orbit(push, x0=(0.9, 0.5), t_end=50.0, backend=backend, **kw)
+            rows.append(dict(case=case, method=backend, status=res.status, n_impacts=res.n_impacts,
+                             zeno_time=getattr(res, "zeno_time", None), message=res.message,
+                             wall_time=time.perf_counter() - t0))
+    # grazing: energy a hair above G(delta): the impact speed is sqrt(2 * 1e-10)
+    m = DuffingImpact(c=0.0, D=0.0, restitution=Newton(0.9))
+    v0 = math.sqrt(2.0 * (m.barrier_energy + 1e-10))
+    for backend in ("heyoka", "scipy"):
+        t0 = time.perf_counter()
+        res = simulate_orbit(m, x0=(0.0, v0), t_end=10.0, backend=backend)
+        rows.append(dict(case="grazing (H - G = 1e-10)", method=backend, status=res.status,
+                         n_impacts=res.n_impacts, zeno_time=None, message=res.message,
+                         wall_time=time.perf_counter() - t0))
+    df = pd.DataFrame(rows)
+    for _, r in df.iterrows():
+        progress(f"  orbit {r.case:32s} {r.method:6s} status={r.status} impacts={r.n_impacts}")
+    return df
+
+
+def validity_maps(out_dir, quick: bool = False, parts=("averaging", "mc", "orbits"), progress=print) -> dict:
+    """Write every validity/failure map (CSV + PNG) into ``out_dir``; returns the DataFrames by name.
+
+    Parameters
+    ----------
+    out_dir : path
+    quick : bool
+        Coarse grids and short runs.
+    parts : sequence of {'averaging', 'mc', 'orbits'}
+    progress : callable
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {}
+    if "averaging" in parts:
+        titles = {"c_D": "Duffing, Ma V_C=0.4, Δ=1", "vc_delta": "Duffing, c=0.025, D=0.05",
+                  "newton_e": "Duffing, Newton e, c=0.025, Δ=1"}
+        for name in _grids(quick):
+            progress(f"[validity] averaging {name}")
+            df = averaging_map(name, quick=quick, progress=progress)
+            df.to_csv(out / f"averaging_{name}.csv", index=False)
+            plot_averaging_map(df, out / f"averaging_{name}.png", df.attrs["x"], df.attrs["y"], titles[name])
+            results[f"averaging_{name}"] = df
+        fit = fit_error_model([results[k] for k in results if k.startswith("averaging_")])
+        progress(f"[validity] fitted error model: {fit}")
+        import json
+
+        (out / "error_model.json").write_text(json.dumps(fit, indent=2))
+        results["error_model"] = fit
+    if "mc" in parts:
+        progress("[validity] Monte Carlo failures")
+        df = mc_failure_map(quick=quick, progress=progress)
+        df.to_csv(out / "mc_failures.csv", index=False)
+        plot_mc_failures(df, out / "mc_failures.png")
+        progress(f"  stiff potential a=1e4, dt=0.01: {df.attrs['stiff']}")
+        results["mc_failures"] = df
+    if "orbits" in parts:
+        progress("[validity] orbit failures")
+        df = orbit_failures(progress=progress)
+        df.to_csv(out / "orbit_failures.csv", index=False)
+        results["orbit_failures"] = df
+    return results
+
+
+__all__ = ["AVERAGING_METHODS", "averaging_map", "fit_error_model", "mc_failure_map", "orbit_failures",
+           "plot_averaging_map", "plot_mc_failures", "validity_maps"]
+
+
+# ----------------------------------------------------------------------------- verification of the chooser
+
+def verification_cases(quick: bool = False) -> list:
+    """(label, model) pairs NOT in the calibration grids of :func:`averaging_map` (other potentials, damping laws,
+    restitution laws and parameter values)."""
+    from models import CustomRestitution, DuffingImpact, DuffingVanDerPolImpact, Ma, RayleighImpact
+
+    cases = [
+        ("duffing a=1 b=0.2 c=0.025 D=0.005 Ma(2.0)", DuffingImpact(restitution=Ma(2.0), D=0.005)),
+        ("duffing a=2 b=0.5 c=0.03 D=0.02 delta=0.8 Ma(0.3)",
+         DuffingImpact(restitution=Ma(0.3), a=2.0, b=0.5, c=0.03, D=0.02, delta=0.8)),
+        ("duffing c=0.3 D=0.15 delta=0.7 Ma(0.2) (heavily damped)",
+         DuffingImpact(restitution=Ma(0.2), c=0.3, D=0.15, delta=0.7)),
+        ("duffing-vdp delta=3 D=0.01 Ma(0.4)", DuffingVanDerPolImpact(delta=3.0)),
+        ("rayleigh c=0.02 k3=0.01 D=0.05 Ma(0.4)", RayleighImpact()),
+    ]
+    if not quick:
+        cases += [
+            ("linear a=1 b=0 c=0.05 D=0.03 delta=1.2 custom e=1/(1+v/3)",
+             DuffingImpact(restitution=CustomRestitution("1/(1 + v/3)"), b=0.0, c=0.05, D=0.03, delta=1.2)),
+            ("duffing-vdp delta=1 D=0.01 Ma(0.4)", DuffingVanDerPolImpact(delta=1.0)),
+            ("duffing c=0.015 D=0.03 delta=1.1 Ma(0.6)",
+             DuffingImpact(restitution=Ma(0.6), c=0.015, D=0.03, delta=1.1)),
+        ]
+    return cases
+
+
+def solve_verification(out_dir=None, tol: float = 0.02, quick: bool = False, cases=None, progress=print):
+    """For each verification case: the chosen method, its actual L1 against converged MC, and the time saved.
+
+    Returns
+    -------
+    pandas.DataFrame
+        case, method, expected_l1, actual_l1, wall_time, mc_wall_time (always-MC at the same tol),
+        mc_actual_l1, time_saved, ref_noise, reason.
+    """
+    import pandas as pd
+
+    from .selection import solve
+    from .workprecision import _run_halves
+
+    rows = []
+    for label, model in (cases if cases is not None else verification_cases(quick)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sol = solve(model, tol)
+            edges = sol.edges
+            h_max = float(edges[-1])
+            scheme = pick_scheme(model)
+            tau = 1.0 / max(sol.choice.diagnostics.r_damp / 6.0 if np.isfinite(sol.choice.diagnostics.r_damp)
+                            else 0.02, 0.01)
+            t_end = min(max(200.0 * tau, 4000.0), 16000.0) if quick else min(max(600.0 * tau, 8000.0), 40000.0)
+            stats, ref_noise, ref_wall = _run_halves(model, scheme, 0.005, 256, t_end, 200.0, h_max, seed=4242)
+            ref = rebin_counts(stats.h_counts, L1_BINS)
+            ref = ref / ref.sum()
+            actual = float(np.abs(sol.masses - ref).sum())
+            if sol.method == "monte-carlo":
+                mc = sol
+            else:
+                mc = solve(model, tol, method="monte-carlo")
+            mc_actual = float(np.abs(mc.masses - ref).sum())
+        rows.append(dict(case=label, method=sol.method, expected_l1=sol.choice.expected_error, actual_l1=actual,
+                         wall_time=sol.wall_time, mc_wall_time=mc.wall_time, mc_actual_l1=mc_actual,
+                         time_saved=mc.wall_time - sol.wall_time, ref_noise=ref_noise, ref_wall=ref_wall,
+                         reason=sol.choice.reason))
+        progress(f"  {label}: {sol.method} expected {sol.choice.expected_error:.3f} actual {actual:.3f} "
+                 f"(ref noise {ref_noise:.3f}) {sol.wall_time:.2f}s vs MC {mc.wall_time:.2f}s (MC L1 {mc_actual:.3f})")
+    df = pd.DataFrame(rows)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        df.to_csv(out / "solve_verification.csv", index=False)
+    return df
+
+
+__all__ += ["solve_verification", "verification_cases"]

@@ -1,0 +1,421 @@
+"""Work-precision charts: error against wall time for Monte Carlo schemes, averaging methods and orbit backends.
+
+``vibro bench work-precision --out-dir DIR [--quick]`` calls :func:`work_precision`, which writes
+
+* ``mc.csv`` / ``mc.png``: every Monte Carlo scheme (naive flip, Euler-Maruyama and Milstein with located
+  crossings, splitting) over a range of dt and paths, on an *elastic* Duffing model whose stationary statistics
+  are known in closed form (:class:`ElasticOracle`): L1 of p(H), |Delta E[x^2]| and the impact-rate error, with
+  the statistical noise of each run (two independent halves) as a band;
+* ``averaging.csv`` / ``averaging.png``: the averaging methods (paper, exact-two-impact, jump) on Example 1 with
+  Ma's law, over grid sizes, against a converged Monte Carlo reference, with Monte Carlo itself as a curve;
+* ``deterministic.csv`` / ``deterministic.png``: heyoka and scipy orbits over tolerances: error of the impact
+  times (against quadrature of the free quasi-period) and of delta H per impact (eq. 11), cost per impact.
+
+Every CSV has a ``method`` column and one row per (method, setting) with ``wall_time`` (s) and the errors.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import integrate
+
+from .selection import L1_BINS, bin_masses, l1_between_histograms, rebin_counts
+
+MC_LABELS = {"naive": "naive flip", "em": "Euler-Maruyama (located)", "milstein": "Milstein (located)",
+             "splitting": "splitting (BAOAB)"}
+
+
+# ----------------------------------------------------------------------------- independent closed forms
+
+@dataclass
+class ElasticOracle:
+    """Exact stationary statistics between *elastic* barriers for h = c*y and additive noise sigma**2.
+
+    The stationary density is p(x, y) ~ exp(-beta H) on |x| < delta with beta = 2c / sigma**2, so y ~ N(0, 1/beta)
+    independent of x, p(x) ~ exp(-beta G(x)), the impact rate (both walls) is 2 p_x(delta) / sqrt(2 pi beta) (Rice)
+    and P(H < h) = int exp(-beta G) erf(sqrt(beta (h - G))) dx / Z. Computed here by scipy quadrature, independently
+    of the averaging and simulation code.
+
+    Examples
+    --------
+    >>> o = ElasticOracle(lambda x: 0.5 * x * x, beta=1.0, delta=np.inf)
+    >>> round(o.mean_x2(), 10)           # harmonic oscillator: E[x^2] = 1/beta
+    1.0
+    >>> round(o.cdf(1.0), 10)            # H ~ Exp(beta) without barriers
+    0.6321205588
+    """
+
+    G: object
+    beta: float
+    delta: float
+
+    @classmethod
+    def for_model(cls, model) -> ElasticOracle:
+        """The oracle for a model with linear damping and additive noise (its restitution law is ignored)."""
+        from hybrid.errors import ModelError
+
+        from .selection import _linear_damping_constant, _sigma2_constant
+
+        c, s2 = _linear_damping_constant(model), _sigma2_constant(model)
+        if c is None or s2 is None or not (c > 0 and s2 > 0):
+            raise ModelError("the elastic closed form needs damping c*y with c > 0 and additive noise")
+        return cls(lambda x: float(model.potential(np.array([x]))[0]), 2.0 * c / s2, model.barriers[1])
+
+    def _lim(self):
+        return self.delta if np.isfinite(self.delta) else 60.0 / math.sqrt(self.beta)
+
+    def _quad(self, f, hi=None):
+        hi = self._lim() if hi is None else hi
+        return integrate.quad(f, -hi, hi, epsabs=0.0, epsrel=1e-12, limit=400)[0]
+
+    def z(self) -> float:
+        return self._quad(lambda x: math.exp(-self.beta * self.G(x)))
+
+    def mean_x2(self) -> float:
+        """E[x^2]."""
+        return self._quad(lambda x: x * x * math.exp(-self.beta * self.G(x))) / self.z()
+
+    def impact_rate(self) -> float:
+        """Impacts per unit time on both walls (0 without barriers)."""
+        if not np.isfinite(self.delta):
+            return 0.0
+        px = math.exp(-self.beta * self.G(self.delta)) / self.z()
+        return 2.0 * px / math.sqrt(2.0 * math.pi * self.beta)
+
+    def cdf(self, h: float) -> float:
+        """P(H < h)."""
+        if h <= 0:
+            return 0.0
+
+        def inner(x):
+            gap = h - self.G(x)
+            return math.exp(-self.beta * self.G(x)) * math.erf(math.sqrt(self.beta * gap)) if gap > 0 else 0.0
+
+        hi = self._lim()
+        # integrate only where G < h (the integrand has a kink at the turning point)
+        from scipy.optimize import brentq
+
+        if self.G(hi) > h:
+            hi = brentq(lambda x: self.G(x) - h, 0.0, hi, xtol=1e-14)
+        return self._quad(inner, hi) / self.z()
+
+    def bin_masses(self, edges) -> np.ndarray:
+        """Exact probability of each energy bin, renormalised over the bins."""
+        cdf = np.array([self.cdf(float(e)) for e in edges])
+        m = np.diff(cdf)
+        return m / m.sum()
+
+
+def free_quasi_period(model, H: float) -> float:
+    """Time between two impacts at opposite barriers of the free orbit at energy H > G(delta): int dx / y.
+
+    Quadrature with x = delta sin(theta) (smooth integrand; y > 0 at the barriers), independent of the orbit code.
+    """
+    d = model.barriers[1]
+
+    def f(th):
+        x = d * math.sin(th)
+        return d * math.cos(th) / math.sqrt(2.0 * H - 2.0 * float(model.potential(np.array([x]))[0]))
+
+    return integrate.quad(f, -0.5 * math.pi, 0.5 * math.pi, epsabs=0.0, epsrel=1e-13, limit=200)[0]
+
+
+# ----------------------------------------------------------------------------- Monte Carlo
+
+def _mc_model(quick: bool):
+    from models import DuffingImpact, Elastic
+
+    # c = 0.1 relaxes in ~10 time units, so the statistical error falls below the discretisation bias quickly
+    return DuffingImpact(restitution=Elastic(), a=1.0, b=0.2, c=0.1, D=0.1, delta=1.0)
+
+
+def _run_halves(model, scheme, dt, paths, t_end, t_burn, h_max, seed, bins=L1_BINS * 10):
+    from hybrid.stochastic import simulate_ensemble
+
+    kw = dict(scheme=scheme, dt=dt, paths=max(paths // 2, 1), t_end=t_end, t_burn=t_burn, h_max=h_max, bins=bins,
+              xy_bins=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # coarse steps are the point of the chart
+        a = simulate_ensemble(model, seed=seed, **kw)
+        b = simulate_ensemble(model, seed=seed + 104729, **kw)
+    noise = l1_between_histograms(rebin_counts(a.h_counts, L1_BINS), rebin_counts(b.h_counts, L1_BINS)) / 2.0
+    return a.merge(b), noise, a.wall_time + b.wall_time
+
+
+def mc_work_precision(quick: bool = True, seed: int = 11, progress=print):
+    """One row per (scheme, dt, paths): wall time and errors against the elastic closed form.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns method, scheme, dt, paths, t_end, path_steps, wall_time, l1, l1_noise, x2_err, x2_ci,
+        rate_err, rate_ci.
+    """
+    import pandas as pd
+
+    model = _mc_model(quick)
+    oracle = ElasticOracle.for_model(model)
+    h_max = 14.0 / oracle.beta
+    edges = np.linspace(0.0, h_max, L1_BINS + 1)
+    exact = oracle.bin_masses(edges)
+    x2, rate = oracle.mean_x2(), oracle.impact_rate()
+    dts = [0.2, 0.1, 0.05, 0.02, 0.01] if quick else [0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.0025]
+    paths_list = [64, 512] if quick else [64, 512, 2048]
+    t_end, t_burn = 2100.0, 100.0
+    rows = []
+    for scheme in ("naive", "em", "milstein", "splitting"):
+        for dt in dts:
+            for paths in paths_list:
+                try:
+                    stats, noise, wall = _run_halves(model, scheme, dt, paths, t_end, t_burn, h_max, seed)
+                except ValueError as exc:  # StepSizeError: the step rule refuses this dt
+                    progress(f"  {scheme} dt={dt:g}: refused ({exc})")
+                    rows.append(dict(method=MC_LABELS[scheme], scheme=scheme, dt=dt, paths=paths, t_end=t_end,
+                                     status="refused", wall_time=np.nan))
+                    continue
+                mass = rebin_counts(stats.h_counts, L1_BINS)
+                l1 = l1_between_histograms(mass, exact)
+                rows.append(dict(
+                    method=MC_LABELS[scheme], scheme=scheme, dt=dt, paths=paths, t_end=t_end, status="ok",
+                    path_steps=stats.path_steps, wall_time=wall, l1=l1, l1_noise=noise,
+                    x2_err=abs(stats.mean_x2.value - x2), x2_ci=stats.mean_x2.ci,
+                    rate_err=abs(stats.impact_rate.value - rate), rate_ci=stats.impact_rate.ci,
+                ))
+                progress(f"  {scheme:9s} dt={dt:<6g} paths={paths:<4d} L1={l1:.4f} (noise {noise:.4f}) "
+                         f"dx2={rows[-1]['x2_err']:.4f} drate={rows[-1]['rate_err']:.4f} {wall:.2f}s")
+    df = pd.DataFrame(rows)
+    df.attrs.update(model=repr(model), x2_exact=x2, rate_exact=rate, h_max=h_max)
+    return df
+
+
+def fit_bias_constants(df) -> dict:
+    """Fit L1 bias ~ C dt**p (p = declared weak order) per scheme from rows whose noise is well below the error."""
+    from .selection import _scheme_order
+
+    out = {}
+    for scheme, g in df[df.status == "ok"].groupby("scheme"):
+        g = g[g.l1 > 2.5 * g.l1_noise]
+        if len(g) == 0:
+            continue
+        p = _scheme_order(scheme)
+        out[scheme] = float(np.median((g.l1 - g.l1_noise) / g.dt**p))
+    return out
+
+
+# ----------------------------------------------------------------------------- averaging
+
+def reference_mc(model, h_max, quick: bool, seed: int = 5, progress=print):
+    """A converged Monte Carlo reference (splitting, small dt, many paths) and its measured noise."""
+    from .selection import pick_scheme
+
+    scheme = pick_scheme(model)
+    dt = 0.005 if scheme == "splitting" else 0.002
+    paths, t_end = (256, 4100.0) if quick else (512, 8200.0)
+    stats, noise, wall = _run_halves(model, scheme, dt, paths, t_end, 100.0, h_max, seed)
+    progress(f"  reference MC ({scheme}, dt={dt}, {paths} paths x {t_end:g}): noise {noise:.4f}, {wall:.1f}s")
+    return rebin_counts(stats.h_counts, L1_BINS), noise, wall
+
+
+def averaging_work_precision(quick: bool = True, progress=print):
+    """Averaging methods over grid sizes, and Monte Carlo over run lengths, against a converged MC reference."""
+    import pandas as pd
+
+    from averaging import stationary_density
+    from models import DuffingImpact
+
+    model = DuffingImpact()  # Example 1, Fig. 2 parameters with delta = 1.0
+    h_max = 20.0
+    edges = np.linspace(0.0, h_max, L1_BINS + 1)
+    ref, ref_noise, _ = reference_mc(model, h_max, quick, progress=progress)
+    ref = ref / ref.sum()
+    rows = []
+    for method in ("paper", "exact-two-impact", "jump"):
+        for points in (50, 100, 200, 400, 800, 1600, 3200):
+            t0 = time.perf_counter()
+            sd = stationary_density(model, method=method, h_max=h_max, points=points)
+            wall = time.perf_counter() - t0
+            l1 = float(np.abs(bin_masses(sd.H, sd.p, edges) - ref).sum())
+            rows.append(dict(method=method, setting=f"points={points}", points=points, wall_time=wall, l1=l1,
+                             l1_noise=ref_noise))
+            progress(f"  {method:16s} points={points:<5d} L1={l1:.4f} {wall:.3f}s")
+    for paths, t_end in ((8, 600.0), (16, 1100.0), (32, 2100.0), (64, 4100.0)) + (((128, 8100.0),) if not quick
+                                                                                 else ()):
+        stats, noise, wall = _run_halves(model, "splitting", 0.01, paths, t_end, 100.0, h_max, seed=77)
+        l1 = l1_between_histograms(rebin_counts(stats.h_counts, L1_BINS), ref)
+        rows.append(dict(method="Monte Carlo (splitting, dt=0.01)", setting=f"paths={paths},t_end={t_end:g}",
+                         points=np.nan, wall_time=wall, l1=l1, l1_noise=math.hypot(noise, ref_noise)))
+        progress(f"  MC paths={paths} t_end={t_end:g} L1={l1:.4f} (noise {noise:.4f}) {wall:.2f}s")
+    df = pd.DataFrame(rows)
+    df.attrs.update(model=repr(model), reference_noise=ref_noise)
+    return df
+
+
+# ----------------------------------------------------------------------------- deterministic
+
+def deterministic_work_precision(quick: bool = True, progress=print):
+    """heyoka and scipy orbits across tolerances: impact-time and delta-H errors, cost per impact."""
+    import pandas as pd
+
+    from hybrid.deterministic import simulate_orbit
+    from models import DuffingImpact, Newton
+
+    e = 0.95
+    model = DuffingImpact(restitution=Newton(e), c=0.0, D=0.0)
+    Gd = model.barrier_energy
+    v0 = 2.2
+    t_end = 60.0 if quick else 200.0
+    rows = []
+    configs = [("heyoka", tol) for tol in (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-15)]
+    configs += [("scipy", tol) for tol in (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)]
+    for backend, tol in configs:
+        simulate_orbit(model, x0=(0.0, v0), t_end=1.0, backend=backend, rtol=tol)  # compile/warm up first
+        t0 = time.perf_counter()
+        res = simulate_orbit(model, x0=(0.0, v0), t_end=t_end, backend=backend, rtol=tol)
+        wall = time.perf_counter() - t0
+        df = res.impacts.to_pandas()
+        n = len(df)
+        # oracle: energies after each impact are G + e^2 (H - G) exactly; times are sums of free half-crossings
+        H = 0.5 * v0 * v0
+        t = free_quasi_period(model, H) / 2.0  # x = 0 to the first barrier: half of a crossing
+        times, dH = [], []
+        for _k in range(n):
+            times.append(t)
+            dH.append((1.0 - e * e) * (H - Gd))
+            H = Gd + e * e * (H - Gd)
+            t += free_quasi_period(model, H)
+        terr = float(np.max(np.abs(df.t.to_numpy() - np.array(times)))) if n else np.nan
+        herr = float(np.max(np.abs((df.H_minus - df.H_plus).to_numpy() - np.array(dH)))) if n else np.nan
+        rows.append(dict(method=backend, setting=f"rtol={tol:g}", rtol=tol, wall_time=wall, n_impacts=n,
+                         cost_per_impact=wall / max(n, 1), t_err=terr, dH_err=herr, status=res.status))
+        progress(f"  {backend:6s} rtol={tol:<7g} impacts={n} t_err={terr:.2e} dH_err={herr:.2e} "
+                 f"{1e3 * wall / max(n, 1):.3f} ms/impact")
+    return pd.DataFrame(rows)
+
+
+# ----------------------------------------------------------------------------- charts
+
+def _loglog(ax, x, y, label, band=None, marker="o"):
+    order = np.argsort(x)
+    x, y = np.asarray(x)[order], np.asarray(y)[order]
+    (line,) = ax.loglog(x, y, marker=marker, ms=4, label=label)
+    if band is not None:
+        b = np.asarray(band)[order]
+        ax.fill_between(x, np.maximum(y - b, y * 0.05), y + b, color=line.get_color(), alpha=0.15, lw=0)
+
+
+def plot_mc(df, path):
+    """Three panels (L1 of p(H), |Delta E x^2|, impact-rate error) against wall time, one curve per scheme/paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = df[df.status == "ok"]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    for (scheme, paths), g in ok.groupby(["scheme", "paths"]):
+        lab = f"{MC_LABELS[scheme]}, {paths} paths"
+        _loglog(axes[0], g.wall_time, g.l1, lab, g.l1_noise)
+        _loglog(axes[1], g.wall_time, g.x2_err.clip(lower=1e-5), lab, g.x2_ci)
+        _loglog(axes[2], g.wall_time, g.rate_err.clip(lower=1e-5), lab, g.rate_ci)
+    for ax, t in zip(axes, ("L1 of p(H) vs exact", "|E[x²] − exact|", "|impact rate − exact|")):
+        ax.set_xlabel("wall time [s] (dt decreasing →)")
+        ax.set_title(t, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=6, ncol=1)
+    fig.suptitle("Monte Carlo work-precision, elastic Duffing (c=0.1, D=0.1, Δ=1); bands: 95% / noise", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def plot_averaging(df, path):
+    """L1 against converged MC vs wall time for the averaging methods and MC itself."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for method, g in df.groupby("method", sort=False):
+        _loglog(ax, g.wall_time, g.l1, method, g.l1_noise if method.startswith("Monte") else None)
+    noise = df.attrs.get("reference_noise")
+    if noise:
+        ax.axhline(noise, color="grey", ls=":", lw=1, label="reference MC noise")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("L1 of p(H) vs converged MC")
+    ax.set_title("Averaging vs Monte Carlo, Example 1 (Fig. 2, Δ=1, V_C=0.4)", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def plot_deterministic(df, path):
+    """Impact-time and delta-H errors against cost per impact for heyoka and scipy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for backend, g in df.groupby("method"):
+        _loglog(axes[0], 1e3 * g.cost_per_impact, g.t_err.clip(lower=1e-16), backend)
+        _loglog(axes[1], 1e3 * g.cost_per_impact, g.dH_err.clip(lower=1e-16), backend)
+    for ax, t in zip(axes, ("max |impact time − quadrature|", "max |δH − (1−e²)(H₋−G(Δ))|")):
+        ax.set_xlabel("cost per impact [ms]")
+        ax.set_title(t, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("Orbit backends across tolerances (free Duffing, Newton e=0.95)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "deterministic"), progress=print) -> dict:
+    """Run the work-precision benchmarks and write CSVs and PNGs into ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : path
+    quick : bool
+        Small sizes (a few minutes on 2 cores).
+    parts : sequence of {'mc', 'averaging', 'deterministic'}
+    progress : callable
+        Receives one line per run.
+
+    Returns
+    -------
+    dict
+        part name -> pandas DataFrame.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    results = {}
+    runners = {"mc": (mc_work_precision, plot_mc), "averaging": (averaging_work_precision, plot_averaging),
+               "deterministic": (deterministic_work_precision, plot_deterministic)}
+    for part in parts:
+        if part not in runners:
+            from hybrid.errors import ParameterError
+
+            raise ParameterError(f"unknown part {part!r}; choose from {sorted(runners)}")
+        run, plot = runners[part]
+        progress(f"[work-precision] {part}")
+        df = run(quick=quick, progress=progress)
+        df.to_csv(out / f"{part}.csv", index=False)
+        plot(df, out / f"{part}.png")
+        results[part] = df
+    return results
+
+
+__all__ = [
+    "ElasticOracle", "averaging_work_precision", "deterministic_work_precision", "fit_bias_constants",
+    "free_quasi_period", "mc_work_precision", "reference_mc", "work_precision",
+]

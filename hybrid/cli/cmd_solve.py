@@ -1,0 +1,66 @@
+"""``vibro solve --tol 0.02``: p(H) by the cheapest method predicted to reach the tolerance, with the reason."""
+
+from __future__ import annotations
+
+
+def register(subparsers) -> None:
+    """Add the ``solve`` subcommand.
+
+    Examples
+    --------
+    >>> from hybrid.cli import build_parser
+    >>> args = build_parser().parse_args(["solve", "--tol", "0.05", "--param", "delta=0.8"])
+    >>> args.tol, args.method, args.param
+    (0.05, 'auto', ['delta=0.8'])
+    """
+    from .common import add_model_arguments
+
+    p = subparsers.add_parser(
+        "solve", help="stationary p(H) by the cheapest adequate method (exact, averaging or Monte Carlo)",
+        description="Pick the cheapest method predicted to reach --tol in the L1 distance of p(H): the exact "
+                    "elastic formula when impacts are elastic at every reachable speed, the paper's averaging when "
+                    "the energy lost per cycle is small, the jump averaging when impacts dominate, Monte Carlo "
+                    "otherwise (dt and paths from a measured error model). Prints the choice, why, the expected "
+                    "error and the cost.",
+    )
+    add_model_arguments(p)
+    p.add_argument("--tol", type=float, default=0.02, help="target L1 distance of p(H) (default 0.02)")
+    p.add_argument("--method", default="auto", choices=["auto", "exact", "paper", "jump", "monte-carlo"],
+                   help="force a method (default: auto)")
+    p.add_argument("--max-cost", type=float, default=600.0, dest="max_cost",
+                   help="wall-time budget of Monte Carlo in seconds (default 600)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--dry-run", action="store_true", help="only print the choice; compute nothing expensive")
+    p.add_argument("--out", default=None, metavar="FILE.csv", help="write p(H) (columns H, p)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Choose, (optionally) run, and report."""
+    from averaging.selection import choose, solve
+    from hybrid.errors import ParameterError
+
+    from .common import model_from_args
+
+    if not (0.0 < args.tol < 2.0):
+        raise ParameterError(f"--tol {args.tol:g}: an L1 distance lies in (0, 2); use e.g. --tol 0.02")
+    model = model_from_args(args)
+    print(f"model: {model!r}")
+    if args.dry_run:
+        if args.method != "auto":
+            raise ParameterError("--dry-run reports the automatic choice; drop --method")
+        print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False).summary())
+        return 0
+    sol = solve(model, args.tol, method=args.method, max_cost=args.max_cost, seed=args.seed)
+    print(sol.summary())
+    preds = ", ".join(f"{k} {v:.3g}" for k, v in sol.choice.predictions.items())
+    print(f"predicted L1 of the candidates: {preds}")
+    if args.out:
+        from pathlib import Path
+
+        path = Path(args.out)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        sol.to_pandas().to_csv(tmp, index=False)
+        tmp.replace(path)
+        print(f"wrote {path}")
+    return 0
