@@ -79,6 +79,26 @@ def test_orbit_bad_input_exits_2_with_one_line(tmp_path, capsys, extra, needle):
     assert not out.exists()
 
 
+def test_orbit_user_model_file(tmp_path, capsys):
+    src = tmp_path / "mymodel.py"
+    src.write_text(
+        "from models import ImpactOscillator, Newton\n"
+        "class Linear(ImpactOscillator):\n"
+        "    name = 'linear'\n"
+        "    def __init__(self, restitution=None, **p):\n"
+        "        super().__init__('k*x', 0, parameters={'k': 1.0, 'D': 0.0, 'delta': 1.0, **p},\n"
+        "                         restitution=restitution or Newton(0.8))\n"
+    )
+    out = tmp_path / "lin.csv"
+    assert main(["orbit", "--model", f"{src}:Linear", "--v0", "2", "--t-end", "5", "--out", str(out)]) == 0
+    df = pd.read_csv(out)
+    # x = 2 sin t reaches the barrier at t = pi/6 with v = sqrt(3); Newton 0.8 scales it by -0.8
+    assert df.t[0] == pytest.approx(math.pi / 6, rel=1e-13)
+    assert df.v_plus[0] == pytest.approx(-0.8 * math.sqrt(3), rel=1e-13)
+    assert "linear" in capsys.readouterr().out
+    assert main(["orbit", "--model", f"{src}:Nope", "--t-end", "5"]) == 2
+
+
 def test_atomic_write_keeps_old_file_on_failure(tmp_path):
     target = tmp_path / "impacts.csv"
     target.write_text("old\n")

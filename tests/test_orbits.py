@@ -11,6 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import sympy as sp
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from problems import (
     bouncing_ball,
     bouncing_ball_impact_times,
@@ -25,7 +27,7 @@ from problems import (
 
 from hybrid import HybridAutomaton, Mode, ModelError, ParameterError, Transition
 from hybrid.deterministic import BACKENDS, ImpactLog, OrbitResult, simulate_orbit
-from models import DuffingImpact, Elastic, Ma, Newton
+from models import DuffingImpact, Elastic, ImpactOscillator, Ma, Newton
 
 ROOT = Path(__file__).resolve().parents[1]
 G1 = duffing_potential(1.0)  # G(delta) at a=1, b=0.2, delta=1: 0.55
@@ -199,6 +201,49 @@ def test_start_on_barrier_at_rest():
     assert 0.5 * res.state[1] ** 2 + duffing_potential(res.state[0]) == pytest.approx(G1, rel=1e-12)
 
 
+@pytest.mark.parametrize("backend", ["heyoka", "scipy"])
+def test_zeno_in_an_impact_oscillator(backend):
+    """A constant force F pushing onto the right barrier (g = -F) with Newton e: a mirrored bouncing ball."""
+    F, e, v0 = 9.81, 0.5, 3.0
+    model = ImpactOscillator("-F", 0, parameters={"F": F, "delta": 1.0, "D": 0.0}, restitution=Newton(e))
+    res = simulate_orbit(model, (1.0, -v0), 10.0, backend=backend)
+    assert res.status == "zeno"
+    assert res.zeno_time == pytest.approx(bouncing_ball_zeno_time(v0, e, F), rel=1e-9)
+    assert set(res.impacts.transition) == {"right"}
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(v0=st.floats(1.06, 4.0), vc=st.floats(0.05, 2.0), delta=st.floats(0.5, 1.5), x0=st.floats(-0.4, 0.4))
+def test_eq11_property_over_parameters(v0, vc, delta, x0):
+    """Any free Duffing orbit (heyoka, one compiled integrator): impacts on the barriers, loss = eq. 11."""
+    law = Ma(vc)
+    model = free_duffing(law, delta=delta)
+    res = simulate_orbit(model, (x0 * delta, v0), 15.0)
+    assert res.status == "ok", res.message
+    Gd = duffing_potential(delta)
+    log = res.impacts
+    if len(log) == 0:
+        assert 0.5 * v0 * v0 + duffing_potential(x0 * delta) <= Gd * (1 + 1e-12)
+        return
+    assert np.all(np.abs(np.abs(log.x) - delta) <= 1e-14 * delta)
+    Hm, Hp = log.observables_before["H"], log.observables_after["H"]
+    e = law.coefficient(np.abs(log.v_minus))
+    pred = (1 - e**2) * (Hm - Gd)
+    assert np.all(np.abs((Hm - Hp) - pred) <= 1e-10 * np.maximum(pred, 1e-4))
+
+
+def test_automaton_without_transitions():
+    x = sp.Symbol("x")
+    A = HybridAutomaton(states=(x,), parameters={"k": 1.0}, modes=[Mode("m", (-sp.Symbol("k") * x,))])
+    for backend in ("heyoka", "scipy"):
+        res = simulate_orbit(A, (1.0,), 2.0, backend=backend, dense=True)
+        assert res.status == "ok" and res.n_impacts == 0
+        assert res.state[0] == pytest.approx(math.exp(-2.0), rel=1e-14 if backend == "heyoka" else 1e-9)
+        assert res.trajectory.t[-1] == 2.0
+    res = simulate_orbit(A, (1.0,), 0.0)
+    assert res.status == "ok" and res.t == 0.0 and res.state[0] == 1.0
+
+
 # ----------------------------------------------------------------------------- general automata
 
 def thermostat():
@@ -311,6 +356,7 @@ def test_parameter_change_does_not_recompile():
         (dict(backend="scipy", method="RK99"), "unknown scipy method"),
         (dict(min_dwell=-1.0), "min_dwell"),
         (dict(max_impacts=-3), "max_impacts"),
+        (dict(max_impacts=0), "max_impacts"),
     ],
 )
 def test_bad_input_gives_clear_errors(kwargs, match):

@@ -160,8 +160,8 @@ def simulate_orbit(
     automaton.mode(mode)  # unknown mode -> ModelError
     if not (isinstance(min_dwell, (int, float)) and math.isfinite(min_dwell) and min_dwell >= 0):
         raise ParameterError(f"min_dwell={min_dwell!r} must be a finite time >= 0")
-    if not (isinstance(max_impacts, (int, np.integer)) and max_impacts >= 0):
-        raise ParameterError(f"max_impacts={max_impacts!r} must be an integer >= 0")
+    if not (isinstance(max_impacts, (int, np.integer)) and max_impacts >= 1):
+        raise ParameterError(f"max_impacts={max_impacts!r} must be an integer >= 1")
     _check_inside(automaton, model, state, mode, values)
 
     if isinstance(backend, str):

@@ -59,7 +59,7 @@ def _compile(automaton, tol):
     kwargs = {} if tol is None else {"tol": float(tol)}
     # heyoka sizes the parameter array from the highest index it meets; parameters used only in resets
     # get no slot (they are applied in Python)
-    return hy.taylor_adaptive(list(zip(variables, rhs)), [0.0] * len(names), t_events=events or None, **kwargs)
+    return hy.taylor_adaptive(list(zip(variables, rhs)), [0.0] * len(names), t_events=events, **kwargs)
 
 
 def parameter_indices(automaton) -> dict:
@@ -165,7 +165,8 @@ class HeyokaBackend(OrbitBackend):
     def start(self, t0, state, mode):
         self.ta.time = float(t0)
         self.ta.state[:] = state
-        self.ta.reset_cooldowns()
+        if self.automaton.transitions:
+            self.ta.reset_cooldowns()
         self._set_mode(mode)
         self._escape = self._zero_guards(self.ta.state, mode, None)
         if self.dense:
