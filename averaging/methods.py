@@ -1,0 +1,180 @@
+"""How impacts enter the averaged energy equation: the methods registry ``METHODS``.
+
+* ``paper`` (eq. 13): a drift -dH/T with dH = (1 - e**4)(H - G(delta)), e = e(v), v = sqrt(2(H - G(delta))).
+* ``exact-two-impact``: the same with dH = (1 - e1**2 e2**2)(H - G(delta)), e1 = e(v), e2 = e(e1 v): the free
+  system's loss over two successive impacts (NOTES.md).
+* ``jump``: no loss drift; every impact is a jump H -> G(delta) + e(v)**2 (H - G(delta)) at rate 2/T(H).
+
+Each method is a small class; ``METHODS[name]`` gives an instance. New methods subclass :class:`ImpactMethod` and
+call :func:`register`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hybrid.errors import ParameterError
+
+
+class ImpactMethod:
+    """Base class: a named treatment of the impact losses.
+
+    Examples
+    --------
+    >>> sorted(METHODS)
+    ['exact-two-impact', 'jump', 'paper']
+    """
+
+    name = "base"
+    jumps = False
+    description = ""
+
+    def loss(self, law, excess):
+        """Energy lost per quasi-period as a drift term, given ``excess`` = H - G(delta) >= 0 (array)."""
+        return np.zeros_like(np.asarray(excess, dtype=float))
+
+    def jump_target(self, law, excess):
+        """Post-impact excess energy e(v)**2 (H - G(delta)) of a single impact (used by jump methods)."""
+        excess = np.asarray(excess, dtype=float)
+        e = law.coefficient(np.sqrt(2.0 * excess))
+        return e * e * excess
+
+    def speed_breakpoints(self, law) -> list[float]:
+        """Impact speeds where the loss is not smooth (kinks of the restitution law)."""
+        return _law_breakpoints(law)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class PaperMethod(ImpactMethod):
+    """Eq. 13 as printed: dH = (1 - e**4)(H - G(delta)), one e for both impacts.
+
+    Examples
+    --------
+    >>> from models import Newton
+    >>> float(PaperMethod().loss(Newton(0.5), 1.0))
+    0.9375
+    """
+
+    name = "paper"
+    description = "eq. 13: drift -(1 - e^4)(H - G(delta))/T"
+
+    def loss(self, law, excess):
+        excess = np.asarray(excess, dtype=float)
+        e = law.coefficient(np.sqrt(2.0 * excess))
+        return (1.0 - e**4) * excess
+
+
+class ExactTwoImpactMethod(ImpactMethod):
+    """Free-orbit loss of two successive impacts: (1 - e1**2 e2**2)(H - G(delta)), e2 = e(e1 v).
+
+    Examples
+    --------
+    >>> from models import Newton
+    >>> float(ExactTwoImpactMethod().loss(Newton(0.5), 1.0))
+    0.9375
+    """
+
+    name = "exact-two-impact"
+    description = "drift -(1 - e1^2 e2^2)(H - G(delta))/T, e2 = e(e1 v)"
+
+    def loss(self, law, excess):
+        excess = np.asarray(excess, dtype=float)
+        v = np.sqrt(2.0 * excess)
+        e1 = law.coefficient(v)
+        e2 = law.coefficient(e1 * v)
+        return (1.0 - e1 * e1 * e2 * e2) * excess
+
+    def speed_breakpoints(self, law) -> list[float]:
+        out = set(_law_breakpoints(law))
+        for b in list(out):  # second impact at e(v) v = b
+            v = _solve_increasing(lambda v: law.coefficient(v) * v, b)
+            if v is not None:
+                out.add(v)
+        return sorted(out)
+
+
+class JumpMethod(ImpactMethod):
+    """Impacts as jumps of the averaged energy: H -> G(delta) + e(v)**2 (H - G(delta)) at rate 2/T(H).
+
+    Examples
+    --------
+    >>> from models import Newton
+    >>> float(JumpMethod().jump_target(Newton(0.5), 1.0))
+    0.25
+    """
+
+    name = "jump"
+    jumps = True
+    description = "jump-diffusion: H -> G + e^2 (H - G) at rate 2/T(H)"
+
+
+METHODS: dict[str, ImpactMethod] = {}
+"""Registry: method name -> instance."""
+
+
+def register(method: ImpactMethod) -> ImpactMethod:
+    """Add a method instance to :data:`METHODS` under its ``name``.
+
+    Examples
+    --------
+    >>> get_method("jump").name
+    'jump'
+    """
+    METHODS[method.name] = method
+    return method
+
+
+for _m in (PaperMethod(), ExactTwoImpactMethod(), JumpMethod()):
+    register(_m)
+
+
+def get_method(method) -> ImpactMethod:
+    """The method instance for a name or an instance; clear error for unknown names."""
+    if isinstance(method, ImpactMethod):
+        return method
+    if method not in METHODS:
+        raise ParameterError(f"unknown averaging method {method!r}; choose one of {sorted(METHODS)}")
+    return METHODS[method]
+
+
+def _law_breakpoints(law) -> list[float]:
+    import sympy as sp
+
+    from models import SPEED
+
+    out = set()
+    vc = law.elastic_below()
+    if 0.0 < vc < np.inf:
+        out.add(float(vc))
+    try:
+        expr = law.expression(SPEED)
+    except Exception:  # callable laws: no symbolic kinks known
+        return sorted(out)
+    for pw in expr.atoms(sp.Piecewise):
+        for _, cond in pw.args:
+            for rel in cond.atoms(sp.core.relational.Relational):
+                for side in (rel.lhs, rel.rhs):
+                    if side.is_number and float(side) > 0:
+                        out.add(float(side))
+    return sorted(out)
+
+
+def _solve_increasing(fun, target, lo=0.0, hi=1.0):
+    """Root of fun(v) = target for an increasing fun (None when not bracketed)."""
+    for _ in range(200):
+        if fun(hi) >= target:
+            break
+        lo, hi = hi, hi * 2.0
+    else:
+        return None
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            break
+        if fun(mid) < target:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)

@@ -1,0 +1,404 @@
+"""Stationary densities of the averaged energy: p(H) (eq. 30), p(x, y) (eq. 31), moments and impact rate.
+
+The drift methods (``paper``, ``exact-two-impact``) evaluate eq. 30 in log space from Chebyshev tables of the
+averaged coefficients. The ``jump`` method solves the stationary jump-diffusion on the output grid with the
+conservative chain of :mod:`averaging.jump`, whose no-jump limit is eq. 30 exactly.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from hybrid.errors import ModelError, NormalisationError, ParameterError
+
+from .jump import EnergyChain
+from .methods import ImpactMethod, get_method
+from .quadrature import DEFAULT_NODES, orbit_integrals
+from .table import EnergyTable
+
+_TABLES: OrderedDict = OrderedDict()
+_TABLES_MAX = 16
+
+
+def energy_table(model, h_max: float, nodes: int = DEFAULT_NODES) -> EnergyTable:
+    """The (cached) Chebyshev table of ``model``'s averaged coefficients on [0, h_max].
+
+    The table does not depend on the restitution law or the method, so it is shared between them.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> energy_table(DuffingImpact(), 4.0) is energy_table(DuffingImpact(), 4.0)
+    True
+    """
+    key = (model.fingerprint(), tuple(sorted(model.params.items())), float(h_max), int(nodes))
+    tab = _TABLES.get(key)
+    if tab is None:
+        tab = EnergyTable(model, h_max, nodes)
+        _TABLES[key] = tab
+        while len(_TABLES) > _TABLES_MAX:
+            _TABLES.popitem(last=False)
+    else:
+        _TABLES.move_to_end(key)
+    return tab
+
+
+def check_confinement(model, method: ImpactMethod, h_max: float, nodes: int = DEFAULT_NODES) -> None:
+    """Raise :class:`NormalisationError` unless the model can have a stationary energy density.
+
+    Requires a single confining well (``model.check_single_well``) and a log-density that decreases at large
+    energies: d log p/dH = (2 m_eff - d sigma2_bar/dH) / sigma2_bar < 0 at h_max, 10 h_max or 100 h_max, where
+    m_eff includes the mean impact loss of the method.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> from averaging.methods import METHODS
+    >>> m = ImpactOscillator("x", "c*y", parameters={"c": -0.01, "D": 0.01}, barriers=None)
+    >>> check_confinement(m, METHODS["paper"], 4.0)
+    Traceback (most recent call last):
+    ...
+    hybrid.errors.NormalisationError: the averaged energy drifts to infinity: ...
+    """
+    try:
+        model.check_single_well()
+    except ModelError as exc:
+        raise NormalisationError(f"no stationary density: {exc}") from exc
+    H = np.array([1.0, 1.001, 10.0, 10.01, 100.0, 100.1]) * h_max
+    coef = averaged_coefficients(model, H, method if not method.jumps else "exact-two-impact", nodes)
+    s2 = coef.diffusion
+    slope = (2.0 * coef.drift[::2] - np.diff(s2)[::2] / np.diff(H)[::2]) / s2[::2]
+    if np.all(slope > 0):
+        raise NormalisationError(
+            "the averaged energy drifts to infinity: the log-density keeps growing at H = "
+            f"{H[0]:g}, {H[2]:g}, {H[4]:g} (net energy input exceeds damping and impact losses), so p(H) cannot be "
+            "normalised. Use positive damping, barriers with dissipative impacts, or a smaller noise intensity"
+        )
+
+
+class AveragedCoefficients:
+    """Averaged coefficients on given energies (direct quadrature, eqs. 21-26).
+
+    Attributes
+    ----------
+    H, drift, diffusion, period, loss : ndarray
+        m_bar(H) (including the loss drift -loss/T for drift methods), sigma2_bar(H), T(H), and the energy loss
+        per quasi-period (0 below G(delta); 0 for the jump method, where impacts are jumps).
+    jump_rate, jump_target : ndarray
+        For the jump method: rate 2/T(H) of impacts above G(delta) and post-impact energy.
+    method : str
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> c = averaged_coefficients(DuffingImpact(), [0.2, 1.0], "paper")
+    >>> list(c.to_pandas().columns)
+    ['H', 'drift', 'diffusion', 'period', 'loss', 'jump_rate', 'jump_target']
+    """
+
+    def __init__(self, H, drift, diffusion, period, loss, jump_rate, jump_target, method: str):
+        self.H, self.drift, self.diffusion, self.period = H, drift, diffusion, period
+        self.loss, self.jump_rate, self.jump_target, self.method = loss, jump_rate, jump_target, method
+
+    def to_pandas(self):
+        """A DataFrame with one row per energy."""
+        import pandas as pd
+
+        return pd.DataFrame({
+            "H": self.H, "drift": self.drift, "diffusion": self.diffusion, "period": self.period, "loss": self.loss,
+            "jump_rate": self.jump_rate, "jump_target": self.jump_target,
+        })
+
+    def __getitem__(self, key):
+        return getattr(self, key)
+
+    def __repr__(self) -> str:
+        return f"AveragedCoefficients(method={self.method!r}, {len(self.H)} energies)"
+
+
+def averaged_coefficients(model, H, method="paper", nodes: int = DEFAULT_NODES) -> AveragedCoefficients:
+    """m_bar(H), sigma2_bar(H) and T(H) of ``model`` on energies ``H`` > 0 (eqs. 21-26).
+
+    Parameters
+    ----------
+    model : ImpactOscillator
+    H : array_like
+        Energies > 0.
+    method : str or ImpactMethod
+        ``paper``, ``exact-two-impact`` or ``jump`` (see :data:`METHODS`).
+    nodes : int
+        Gauss-Legendre nodes per level.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> lin = ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.05}, barriers=None)
+    >>> c = averaged_coefficients(lin, [1.0])
+    >>> round(float(c.drift[0]), 12), round(float(c.diffusion[0]), 12)     # D - c H, 2 D H
+    (-0.05, 0.1)
+    """
+    m = get_method(method)
+    H = np.atleast_1d(np.asarray(H, dtype=float))
+    o = orbit_integrals(model, H, nodes)
+    T = o["T"]
+    drift = o["drift"] / T
+    diffusion = o["diffusion"] / T
+    Gd = model.barrier_energy if model.has_barriers else np.inf
+    excess = np.where(H > Gd, H - Gd, 0.0)
+    law = model.restitution
+    imp = H > Gd
+    loss = np.zeros_like(H)
+    rate = np.zeros_like(H)
+    target = H.copy()
+    if imp.any():
+        if m.jumps:
+            rate[imp] = 2.0 / T[imp]
+            target[imp] = Gd + m.jump_target(law, excess[imp])
+        else:
+            loss[imp] = m.loss(law, excess[imp])
+            drift = drift - loss / T
+    return AveragedCoefficients(H, drift, diffusion, T, loss, rate, target, m.name)
+
+
+class StationaryDensity:
+    """The stationary energy density p(H) of a model under one averaging method, and what follows from it.
+
+    Built by :func:`stationary_density`. ``H`` and ``p`` are the grid and the density normalised to 1 on
+    [0, h_max]; moments are integrals over [0, h_max] with accurate quadrature.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> sd = stationary_density(DuffingImpact(), "paper", h_max=4.0, points=201)
+    >>> round(sd.total_mass, 12)
+    1.0
+    >>> sd.to_pandas().columns.tolist()
+    ['H', 'p']
+    """
+
+    def __init__(self, model, method: ImpactMethod, table: EnergyTable, H, log_p, log_density, qH, qw):
+        self.model = model
+        self.method = method.name
+        self._method = method
+        self.table = table
+        self.h_max = table.h_max
+        self.H = H
+        self.log_p = log_p
+        with np.errstate(over="ignore"):
+            self.p = np.exp(log_p)
+        self._log_density = log_density
+        self._qH = qH
+        self._qp = np.exp(log_density(qH)) * qw
+        Gd = table.G_delta
+        self.mean_energy = float(np.sum(self._qp * qH))
+        self.mean_x2 = float(np.sum(self._qp * table.mean_x2(qH)))
+        self.prob_below_barrier = float(np.sum(self._qp[qH <= Gd])) if np.isfinite(Gd) else 1.0
+        above = qH > Gd
+        self.impact_rate = float(np.sum(self._qp[above] * 2.0 / table.period(qH[above]))) if above.any() else 0.0
+        self.total_mass = float(np.sum(self._qp))
+        self.tail_density = float(self.p[-1])
+
+    @property
+    def barrier_energy(self) -> float:
+        """G(delta) (inf without barriers)."""
+        return self.table.G_delta
+
+    def density(self, H):
+        """p(H) at arbitrary energies (0 outside [0, h_max])."""
+        H = np.asarray(H, dtype=float)
+        inside = (H >= 0) & (H <= self.h_max)
+        out = np.zeros_like(H)
+        if inside.any():
+            out[inside] = np.exp(self._log_density(H[inside]))
+        return out
+
+    def _joint_energy(self, H):
+        H = np.asarray(H, dtype=float)
+        inside = (H >= 0) & (H <= self.h_max)
+        out = np.zeros_like(H)
+        if inside.any():
+            Hi = H[inside]
+            out[inside] = np.exp(self._log_density(Hi)) / self.table.period(Hi)
+        return out
+
+    def joint(self, x, y):
+        """p(x, y) = p(H)/T(H) at H = y**2/2 + G(x) (eq. 31) on the grid x (nx) by y (ny) -> array (ny, nx).
+
+        Zero outside the barriers and above h_max.
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density(DuffingImpact(), "paper", points=101)
+        >>> sd.joint(np.linspace(-1, 1, 5), np.linspace(-2, 2, 3)).shape
+        (3, 5)
+        """
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        left, right = self.model.barriers
+        H = 0.5 * y[:, None] ** 2 + self.model.potential(x)[None, :]
+        out = self._joint_energy(H)
+        out[:, (x < left) | (x > right)] = 0.0
+        return out
+
+    def marginal_x(self, x, nodes: int = 96):
+        """p(x) = int p(x, y) dy.
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density(DuffingImpact(), "paper", points=101)
+        >>> bool(sd.marginal_x(np.array([0.0]))[0] > 0)
+        True
+        """
+        x = np.atleast_1d(np.asarray(x, dtype=float))
+        left, right = self.model.barriers
+        Gx = self.model.potential(x)
+        ok = (x >= left) & (x <= right) & (Gx < self.h_max)
+        out = np.zeros_like(x)
+        if not ok.any():
+            return out
+        Gx = Gx[ok]
+        ymax = np.sqrt(2.0 * (self.h_max - Gx))
+        Gd = self.table.G_delta
+        ykink = np.sqrt(2.0 * np.clip(Gd - Gx, 0.0, None)) if np.isfinite(Gd) else ymax
+        ykink = np.minimum(ykink, ymax)
+        t, w = np.polynomial.legendre.leggauss(nodes)
+        total = np.zeros_like(Gx)
+        for lo, hi in ((np.zeros_like(ymax), ykink), (ykink, ymax)):
+            yy = 0.5 * (lo + hi)[:, None] + 0.5 * (hi - lo)[:, None] * t
+            vals = self._joint_energy(np.minimum(0.5 * yy**2 + Gx[:, None], self.h_max))
+            total += np.sum(vals * w, axis=1) * 0.5 * (hi - lo)
+        out[ok] = 2.0 * total
+        return out
+
+    def marginal_y(self, y, nodes: int = 96):
+        """p(y) = int p(x, y) dx over the barriers.
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density(DuffingImpact(), "paper", points=101)
+        >>> bool(sd.marginal_y(np.array([0.0]))[0] > 0)
+        True
+        """
+        from .quadrature import turning_points
+
+        y = np.atleast_1d(np.asarray(y, dtype=float))
+        left, right = self.model.barriers
+        out = np.zeros_like(y)
+        kin = 0.5 * y * y
+        ok = kin < self.h_max
+        if not ok.any():
+            return out
+        kin = kin[ok]
+        # x range where H <= h_max, and the points where H crosses G(delta) (kinks of T)
+        lo, hi = turning_points(self.model, self.h_max - kin)
+        lo, hi = np.maximum(lo, left), np.minimum(hi, right)
+        Gd = self.table.G_delta
+        pieces = []
+        if np.isfinite(Gd):
+            lev = np.clip(Gd - kin, 1e-300, None)
+            klo, khi = turning_points(self.model, lev)
+            has = Gd - kin > 0
+            klo = np.where(has, np.maximum(klo, lo), 0.0)
+            khi = np.where(has, np.minimum(khi, hi), 0.0)
+            pieces = [(lo, klo), (klo, khi), (khi, hi)]
+        else:
+            pieces = [(lo, hi)]
+        t, w = np.polynomial.legendre.leggauss(nodes)
+        total = np.zeros_like(kin)
+        for a, b in pieces:
+            xx = 0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * t
+            H = np.minimum(kin[:, None] + self.model.potential(xx), self.h_max)
+            total += np.sum(self._joint_energy(H) * w, axis=1) * 0.5 * (b - a)
+        out[ok] = total
+        return out
+
+    def to_pandas(self):
+        """DataFrame with columns H, p (metadata in ``.attrs``)."""
+        import pandas as pd
+
+        df = pd.DataFrame({"H": self.H, "p": self.p})
+        df.attrs.update(self.metadata())
+        return df
+
+    def metadata(self) -> dict:
+        """Method, model description and summary statistics (JSON-friendly)."""
+        return {
+            "method": self.method, "model": self.model.describe(), "h_max": self.h_max,
+            "mean_energy": self.mean_energy, "mean_x2": self.mean_x2,
+            "prob_below_barrier": self.prob_below_barrier, "impact_rate": self.impact_rate,
+            "barrier_energy": self.barrier_energy,
+        }
+
+    def __repr__(self) -> str:
+        return (f"StationaryDensity(model={self.model.name!r}, method={self.method!r}, points={len(self.H)}, "
+                f"E[H]={self.mean_energy:.6g}, P(H<G)={self.prob_below_barrier:.6g})")
+
+
+def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 2000,
+                       nodes: int = DEFAULT_NODES, check: bool = True) -> StationaryDensity:
+    """The stationary energy density p(H) on ``points`` energies in [0, h_max], normalised to 1 there.
+
+    Parameters
+    ----------
+    model : ImpactOscillator
+        Any model with a single confining well and symmetric impact level G(left) = G(right).
+    method : str or ImpactMethod
+        ``paper`` (eq. 13 loss as drift), ``exact-two-impact``, or ``jump`` (impacts as jumps).
+    h_max : float
+        Upper end of the energy range; mass above it is discarded (choose it in the tail).
+    points : int
+        Grid size (the jump method solves on this grid, so it also sets its resolution).
+    nodes : int
+        Gauss-Legendre nodes per orbit quadrature.
+    check : bool
+        Check confinement first (raises :class:`NormalisationError` when p cannot be normalised).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> sd = stationary_density(DuffingImpact(), "jump", h_max=4.0, points=400)
+    >>> 0.0 < sd.prob_below_barrier < 1.0
+    True
+    """
+    m = get_method(method)
+    if int(points) != points or points < 3:
+        raise ParameterError(f"points={points!r} must be an integer >= 3")
+    if not (np.isfinite(h_max) and h_max > 0):
+        raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
+    if model.has_barriers:
+        model.barrier_energy  # noqa: B018 - raises ModelError for asymmetric impact levels
+    if check:
+        check_confinement(model, m, h_max, nodes)
+    tab = energy_table(model, h_max, nodes)
+    law = model.restitution
+    H = np.linspace(0.0, float(h_max), int(points))
+    if not m.jumps:
+        cuts = [v / np.sqrt(2.0) for v in m.speed_breakpoints(law)] if tab.has_impacts else []
+        qH, qw = tab.quadrature(cuts=cuts)
+        lq = tab.log_density(qH, m, law)
+        S = float(np.max(lq))
+        logZ = S + np.log(np.sum(qw * np.exp(lq - S)))
+
+        def log_density(h):
+            return tab.log_density(h, m, law) - logZ
+
+        log_p = log_density(H)
+    else:
+        chain = EnergyChain(tab, H, m, law)
+        r = chain.stationary_ratio()
+        Z = float(np.sum(chain.W * r))
+        logZ = chain.shift + np.log(Z)
+
+        def log_density(h):
+            return np.log(np.interp(h, H, r)) + tab.log_density(h, None, law) - logZ
+
+        log_p = np.log(r) + chain.logp0_nodes - logZ
+        qH, qw = chain.Hq, chain.wq
+    if not np.all(np.isfinite(log_p[1:])):
+        raise NormalisationError("p(H) is not finite on the grid; increase points or check the model's parameters")
+    return StationaryDensity(model, m, tab, H, log_p, log_density, qH, qw)
