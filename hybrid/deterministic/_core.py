@@ -246,6 +246,10 @@ def simulate_orbit(
         observables_after={k: np.array([o[i] for o in ob_after], dtype=float) for i, k in enumerate(obs_names)},
         state_names=tuple(names), oscillator=model is not None,
     )
+    if model is not None and "H" not in log.observables_before and len(log):
+        # G has no closed form: the model's numerical energy (quadrature) fills the H columns
+        log.observables_before["H"] = np.asarray(model.energy(log.before[:, 0], log.before[:, 1]), dtype=float)
+        log.observables_after["H"] = np.asarray(model.energy(log.after[:, 0], log.after[:, 1]), dtype=float)
     trajectory = None
     if dense:
         trajectory = Trajectory(

@@ -4,6 +4,10 @@ Each step's guard values are compared with those at the step start; a sign chang
 refined with ``brentq`` on the step's dense output (as ``solve_ivp`` does), and the earliest crossing (lowest
 priority number on ties) stops the integration. After the reset a new solver starts from the post-impact state.
 A guard that *starts* at zero (just after a reset on that guard) is not a crossing, so a reset never re-fires.
+
+Limitation (shared with ``solve_ivp``): a guard that crosses zero and back within one step is not seen; pass
+``max_step`` to bound the step when orbits graze a guard, or use the heyoka backend, which finds every root of
+the step's Taylor polynomial.
 """
 
 from __future__ import annotations
