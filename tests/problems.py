@@ -64,7 +64,9 @@ def action_mpmath(G, H: float, lo: float, hi: float, dps: int = 30) -> float:
 def duffing_period(H: float, a=1.0, b=0.2, delta=math.inf) -> float:
     """Free period (eq. 8) or quasi-period (eq. 14) of the Duffing oscillator, by mpmath."""
     A = math.sqrt((math.sqrt(a * a + 4 * b * H) - a) / b) if b > 0 else math.sqrt(2 * H / a)
-    lim = min(A, delta)
+    if A < delta:  # free orbit: the turning point must be exact, so integrate in theta (x = A sin theta)
+        return duffing_free_period_mp(H, a, b)
+    lim = delta
     G = lambda x: a * x * x / 2 + b * x**4 / 4  # noqa: E731
     return period_mpmath(G, H, -lim, lim)
 
