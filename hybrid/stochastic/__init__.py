@@ -16,6 +16,7 @@ from ._runner import (
     StepSizeWarning,
     check_step,
     default_chunk_paths,
+    drive_paths,
     simulate_ensemble,
     speed_scale,
 )
@@ -25,6 +26,6 @@ from ._statistics import EnsembleStatistics, Estimate, atomic_write_text, ratio_
 __all__ = [
     "SCHEMES", "EnsembleStatistics", "Estimate", "EulerMaruyama", "Kernel", "Milstein", "NaiveFlip", "Scheme",
     "Splitting", "StepSizeWarning", "atomic_write_text", "build_kernel", "cache_dir", "check_step", "chunk_states",
-    "default_chunk_paths", "generate_source", "get_scheme", "normals", "ratio_estimate", "simulate_ensemble",
-    "speed_scale", "ziggurat_tables",
+    "default_chunk_paths", "drive_paths", "generate_source", "get_scheme", "normals", "ratio_estimate",
+    "simulate_ensemble", "speed_scale", "ziggurat_tables",
 ]

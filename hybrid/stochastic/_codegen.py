@@ -494,10 +494,11 @@ def load_source(name: str, src: str, user_law=None) -> tuple[types.ModuleType, P
     return module, path
 
 
-def build_kernel(model, scheme, cache: bool = True) -> Kernel:
+def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel:
     """Generate, load and compile (or load from the numba cache) the kernel for ``model`` and ``scheme``.
 
     ``Kernel.compile_time`` is the wall time of this call (generation, import, compile or cache load).
+    ``warm=False`` skips compiling ``run_chunks`` (numba compiles lazily at the first call).
 
     Examples
     --------
@@ -510,7 +511,8 @@ def build_kernel(model, scheme, cache: bool = True) -> Kernel:
     name = _module_name(model, scheme, src)
     module, path = load_source(name, src, user_law)
     kern = Kernel(module, path, tuple(model.params), law_values, scheme.name, src)
-    warm_up(kern, model)
+    if warm:
+        warm_up(kern, model)
     kern.compile_time = time.perf_counter() - t0
     return kern
 

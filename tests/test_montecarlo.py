@@ -1,0 +1,396 @@
+"""Monte Carlo engine: RNG, generated kernels, impacts inside the step, orders, accuracy, reproducibility, CLI.
+
+Oracles are independent of the engine: the normal law, closed-form free flight in a box, the exact elastic
+stationary density (tests/problems.py), convergence slopes against the declared orders.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+import warnings
+
+import numba
+import numpy as np
+import pytest
+from problems import elastic_duffing
+from scipy import stats as st
+
+from hybrid.cli import main as vibro
+from hybrid.errors import ModelError, ParameterError, RestitutionError, StepSizeError
+from hybrid.stochastic import (
+    SCHEMES,
+    EnsembleStatistics,
+    StepSizeWarning,
+    build_kernel,
+    check_step,
+    chunk_states,
+    drive_paths,
+    generate_source,
+    normals,
+    simulate_ensemble,
+    ziggurat_tables,
+)
+from models import CustomRestitution, DuffingImpact, Elastic, ImpactOscillator, Ma, Newton, RayleighImpact
+
+INF = float("inf")
+
+
+def fit_slope(dts, errs):
+    return float(np.polyfit(np.log(dts), np.log(errs), 1)[0])
+
+
+# ------------------------------------------------------------------------------------------------ random numbers
+def test_ziggurat_normals_follow_the_normal_law():
+    zx, zk, zf = ziggurat_tables()
+    z = normals(chunk_states(7, 1)[0].copy(), 2_000_000, zx, zk, zf)
+    # chi-square on 200 equiprobable cells of N(0, 1)
+    edges = st.norm.ppf(np.linspace(0, 1, 201))
+    counts = np.histogram(z, edges)[0]
+    p = st.chisquare(counts).pvalue
+    assert p > 1e-4
+    # the tail beyond r (sampled by a separate branch) has the right mass
+    r = zx[1]
+    tail = np.mean(np.abs(z) > r)
+    exact = math.erfc(r / math.sqrt(2))
+    assert abs(tail - exact) < 5 * math.sqrt(exact / len(z))
+    assert abs(np.mean(z**4) - 3.0) < 0.02
+
+
+def test_chunk_streams_come_from_spawned_seed_sequences():
+    a = chunk_states(1, 5)
+    assert np.array_equal(a, chunk_states(1, 5))
+    assert len({tuple(r) for r in a}) == 5
+    child = np.random.SeedSequence(1).spawn(5)[3].generate_state(4, np.uint64)
+    assert np.array_equal(a[3], child)
+
+
+# ------------------------------------------------------------------------------------------------ code generation
+def test_parameters_are_runtime_arguments_not_source():
+    m1 = DuffingImpact(restitution=Ma(0.4))
+    m2 = DuffingImpact(restitution=Ma(1.3), delta=0.7, c=0.1, D=0.2)
+    s1, law1, _ = generate_source(m1, SCHEMES["milstein"])
+    s2, law2, _ = generate_source(m2, SCHEMES["milstein"])
+    assert s1 == s2  # same module, hence the same compiled kernel
+    assert law1[0] == 0.4 and law2[0] == 1.3
+    assert "0.4" not in s1 and "0.025" not in s1
+
+
+def test_second_process_loads_the_kernel_from_the_disk_cache():
+    code = (
+        "from models import DuffingImpact, Elastic\n"
+        "from hybrid.stochastic import build_kernel, SCHEMES\n"
+        "k = build_kernel(DuffingImpact(restitution=Elastic()), SCHEMES['splitting'])\n"
+        "st = k.run_chunks.stats\n"
+        "print(sum(st.cache_hits.values()), sum(st.cache_misses.values()))\n"
+    )
+    build_kernel(DuffingImpact(restitution=Elastic()), SCHEMES["splitting"])  # make sure it is cached
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=os.environ)
+    hits, misses = out.stdout.split()[-2:]
+    assert int(hits) == 1 and int(misses) == 0, out.stdout
+
+
+def test_custom_restitution_expression_and_callable():
+    law = CustomRestitution("1/(1 + v)")
+    src, values, user = generate_source(DuffingImpact(restitution=law), SCHEMES["milstein"])
+    assert user is None and "_v" in src
+    # a numba-compilable callable is accepted (compiled in memory), an impossible one is refused clearly
+    _, _, user = generate_source(DuffingImpact(restitution=CustomRestitution(lambda v: 0.9 + 0.0 * v)),
+                                 SCHEMES["milstein"])
+    assert user is not None and user(2.0) == pytest.approx(0.9)
+    import pandas as pd
+
+    bad = CustomRestitution(lambda v: float(pd.Series([0.9]).iloc[0]) + 0 * v)
+    with pytest.raises(RestitutionError, match="cannot be compiled by numba"):
+        generate_source(DuffingImpact(restitution=bad), SCHEMES["milstein"])
+
+
+def test_splitting_refuses_nonlinear_damping_and_unknown_scheme():
+    with pytest.raises(ModelError, match="linear in y"):
+        generate_source(RayleighImpact(), SCHEMES["splitting"])
+    with pytest.raises(ModelError, match="unknown scheme"):
+        simulate_ensemble(DuffingImpact(), "rk4", paths=2, t_end=1.0, t_burn=0.0)
+
+
+# ------------------------------------------------------------------------------------------------ impacts in the step
+def _box_oracle(x0, v, t, delta, e):
+    """Free flight in a box |x| <= delta with Newton restitution e, by explicit event stepping (plain Python)."""
+    x, left = x0, t
+    while True:
+        wall = delta if v > 0 else -delta
+        s = (wall - x) / v if v != 0 else INF
+        if s >= left:
+            return x + v * left, v
+        x, v, left = wall, -e * v, left - s
+
+
+@pytest.mark.parametrize("scheme", ["splitting", "milstein", "em"])
+@pytest.mark.parametrize("e", [1.0, 0.8])
+def test_many_impacts_in_one_step_follow_the_exact_free_flight(scheme, e):
+    law = Elastic() if e == 1.0 else Newton(e)
+    model = DuffingImpact(restitution=law, a=0.0, b=0.0, c=0.0, D=0.0, delta=0.1)
+    # speed 3, gap 0.2, dt 0.5: about seven impacts inside each step
+    out = drive_paths(model, scheme, 0.5, np.zeros((1, 4)), x0=(0.03, 3.0))
+    x, v = _box_oracle(0.03, 3.0, 2.0, 0.1, e)
+    assert out[0, 0] == pytest.approx(x, abs=1e-12)
+    assert out[0, 1] == pytest.approx(v, rel=1e-12)
+
+
+def test_barriers_never_violated_over_1e8_path_steps():
+    model = DuffingImpact()  # Ma restitution, delta = 1
+    total = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StepSizeWarning)
+        for scheme, dt, paths, t_end in [("splitting", 0.03, 512, 5800.0), ("milstein", 0.03, 64, 1500.0),
+                                         ("splitting", 0.1, 64, 1500.0)]:
+            s = simulate_ensemble(model, scheme, dt=dt, paths=paths, t_end=t_end, t_burn=0.0, xy_bins=None, seed=3,
+                                  check_dt=dt < 0.05)
+            assert s.violations == 0 and s.total("stuck") == 0
+            assert s.impacts > 1000
+            total += s.path_steps
+    assert total >= 1e8
+
+
+def test_step_size_rule_refuses_and_warns():
+    model = DuffingImpact()
+    with pytest.raises(StepSizeError, match="too large"):
+        check_step(model, 0.5)
+    with pytest.warns(StepSizeWarning, match="coarse"):
+        check_step(model, 0.05)
+    assert check_step(model, 1e-3)["ok"]
+
+
+# ------------------------------------------------------------------------------------------------ orders
+def _strong_errors(model, scheme, z, ref, T, ks):
+    errs, dts = [], []
+    P, nref = z.shape
+    for k in ks:
+        n = 2**k
+        zc = z.reshape(P, n, nref // n).sum(-1) / math.sqrt(nref // n)
+        out = drive_paths(model, scheme, T / n, zc, x0=(0.5, 0.0))
+        errs.append(np.mean(np.abs(out[:, 1] - ref[:, 1])))
+        dts.append(T / n)
+    return dts, errs
+
+
+def test_strong_orders_em_half_milstein_one_with_multiplicative_noise():
+    model = ImpactOscillator("a*x", "c*y", noise=("1 + s*y",), intensity="D",
+                             parameters={"a": 1.0, "c": 0.5, "D": 0.5, "s": 0.5}, barriers=None)
+    z = np.random.default_rng(3).standard_normal((1000, 2**12))
+    ref = drive_paths(model, "milstein", 1.0 / 2**12, z, x0=(0.5, 0.0))
+    for scheme in ("em", "milstein"):
+        dts, errs = _strong_errors(model, scheme, z, ref, 1.0, (4, 5, 6, 7))
+        assert abs(fit_slope(dts, errs) - SCHEMES[scheme].strong_order) < 0.2, (scheme, errs)
+
+
+def test_strong_order_splitting_additive_noise():
+    model = DuffingImpact(restitution=Elastic(), a=1.0, b=0.2, c=0.5, D=0.5, delta=INF)
+    z = np.random.default_rng(4).standard_normal((1000, 2**12))
+    ref = drive_paths(model, "splitting", 1.0 / 2**12, z, x0=(0.5, 0.0))
+    dts, errs = _strong_errors(model, "splitting", z, ref, 1.0, (4, 5, 6, 7))
+    assert abs(fit_slope(dts, errs) - SCHEMES["splitting"].strong_order) < 0.2, errs
+
+
+# Strongly damped Duffing between elastic walls: short correlation time, so the weak bias is resolved cheaply.
+# Exact: E[y^2] = D/c = 1 and E[x^2] from the Gibbs density (tests/problems.py).
+def _weak_biases(scheme, dts, quantity, paths, t_end, seed=11):
+    model, exact = elastic_duffing(delta=1.0, a=1.0, b=0.2, c=0.5, D=0.5)
+    target = {"mean_y2": exact.mean_y2(), "mean_x2": exact.mean_x2()}[quantity]
+    biases, cis = [], []
+    for dt in dts:
+        s = simulate_ensemble(model, scheme, dt=dt, paths=paths, t_end=t_end, t_burn=20.0, seed=seed, h_max=20.0,
+                              xy_bins=None, check_dt=False)
+        e = getattr(s, quantity)
+        biases.append(abs(e.value - target))
+        cis.append(e.ci)
+    return np.array(biases), np.array(cis)
+
+
+def test_weak_order_em_with_elastic_barriers():
+    dts = [0.1, 0.05, 0.025]
+    b, ci = _weak_biases("em", dts, "mean_y2", paths=512, t_end=1000.0)
+    assert np.all(b > 4 * ci), (b, ci)  # the slope is resolved, not noise
+    assert abs(fit_slope(dts, b) - SCHEMES["em"].weak_order_barriers) < 0.25, b
+
+
+def test_weak_order_splitting_with_elastic_barriers():
+    dts = [0.4, 0.3, 0.2]
+    b, ci = _weak_biases("splitting", dts, "mean_x2", paths=4096, t_end=1000.0)
+    assert np.all(b > 4 * ci), (b, ci)
+    assert abs(fit_slope(dts, b) - SCHEMES["splitting"].weak_order_barriers) < 0.4, b
+
+
+# ------------------------------------------------------------------------------------------------ accuracy
+def _exact_bin_probabilities(exact, edges, G_delta):
+    """Exact P(H in bin) by Simpson's rule on each bin, renormalised over the histogram range."""
+    lo, hi = edges[:-1], edges[1:]
+    pts = np.concatenate([lo, 0.5 * (lo + hi), hi])
+    pts = np.where(pts <= 0, 1e-9, pts)
+    dens = exact.energy_density(pts, G_delta)
+    n = len(lo)
+    q = (hi - lo) / 6 * (dens[:n] + 4 * dens[n:2 * n] + dens[2 * n:])
+    return q / q.sum()
+
+
+@pytest.mark.parametrize("scheme,dt", [("splitting", 0.02), ("milstein", 5e-3)])
+def test_elastic_barriers_match_the_exact_stationary_statistics(scheme, dt):
+    model, exact = elastic_duffing()  # Example 1, delta = 1, e = 1
+    p = SCHEMES[scheme].weak_order_barriers
+    kw = dict(paths=256, t_end=2000.0, t_burn=200.0, h_max=4.0, bins=20, xy_bins=None)
+    a = simulate_ensemble(model, scheme, dt=dt, seed=21, **kw)
+    b = simulate_ensemble(model, scheme, dt=dt, seed=22, **kw)
+    s = a.merge(b)
+    coarse = simulate_ensemble(model, scheme, dt=4 * dt, seed=23, **kw)
+    checks = {
+        "mean_x2": exact.mean_x2(),
+        "prob_below_barrier": exact.probability_below(model.barrier_energy),
+        "impact_rate_left": exact.impact_rate_per_wall(),
+        "impact_rate_right": exact.impact_rate_per_wall(),
+    }
+    for name, value in checks.items():
+        est, c = getattr(s, name), getattr(coarse, name)
+        # bias bound from the declared weak order: |bias(4 dt)| <= |est - exact| + 3 ci, scaled by 4**-p
+        bound = (abs(c.value - value) + 3 * c.ci) / 4**p
+        assert abs(est.value - value) < 3 * est.ci + bound, (name, est, value, bound)
+    # L1 distance of p(H) against the exact density; noise level from the two independent halves
+    q = _exact_bin_probabilities(exact, s.h_edges, model.barrier_energy)
+    pa, pb, pm = (x.h_counts / x.h_counts.sum() for x in (a, b, s))
+    noise = 0.5 * np.abs(pa - pb).sum()  # ~ L1 noise of the merged histogram
+    pc = coarse.h_counts / coarse.h_counts.sum()
+    bound = (np.abs(pc - q).sum() + 3 * noise * math.sqrt(2)) / 4**p
+    assert np.abs(pm - q).sum() < 3 * noise + bound, (np.abs(pm - q).sum(), noise, bound)
+    assert s.violations == 0
+
+
+def test_em_pumps_energy_into_the_lightly_damped_oscillator():
+    # the known pitfall, measured: explicit EM at c = 0.025, dt = 2e-3 raises the temperature E[y^2] = D/c by ~4 %
+    model, exact = elastic_duffing(delta=INF)
+    kw = dict(paths=256, t_end=1000.0, t_burn=100.0, xy_bins=None, seed=5, dt=2e-3)
+    em = simulate_ensemble(model, "em", **kw)
+    assert em.mean_y2.value - exact.mean_y2() > 3 * em.mean_y2.ci
+
+
+# ------------------------------------------------------------------------------------------------ reproducibility
+def test_bitwise_identical_for_one_and_two_threads():
+    model = DuffingImpact()
+    kw = dict(dt=0.01, paths=64, t_end=300.0, t_burn=20.0, seed=9, xy_bins=(20, 20))
+    old = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = simulate_ensemble(model, "splitting", **kw)
+        numba.set_num_threads(2)
+        two = simulate_ensemble(model, "splitting", **kw)
+    finally:
+        numba.set_num_threads(old)
+    for f in ("h_counts", "xy_counts", "v_counts", "chunk_counts", "chunk_sums"):
+        assert np.array_equal(getattr(one, f), getattr(two, f)), f
+    assert one.mean_energy == two.mean_energy
+
+
+def test_merge_adds_exactly_and_refuses_double_counting():
+    model = DuffingImpact()
+    kw = dict(dt=0.01, paths=16, t_end=100.0, t_burn=10.0, xy_bins=None)
+    a = simulate_ensemble(model, "splitting", seed=1, **kw)
+    b = simulate_ensemble(model, "splitting", seed=2, **kw)
+    m = a.merge(b)
+    assert np.array_equal(m.h_counts, a.h_counts + b.h_counts)
+    assert m.impacts == a.impacts + b.impacts and m.paths == 32
+    n = a.total("samples") + b.total("samples")
+    expect = (a.mean_energy.value * a.total("samples") + b.mean_energy.value * b.total("samples")) / n
+    assert m.mean_energy.value == pytest.approx(expect, rel=1e-14)
+    with pytest.raises(ParameterError, match="counted twice"):
+        a.add_chunks(a.chunk_ids[:1], a.chunk_paths[:1], a.h_counts[None], None, a.v_counts[None],
+                     a.chunk_counts[:1], a.chunk_sums[:1])
+
+
+def test_checkpoint_roundtrip_and_resume_in_process(tmp_path):
+    model = DuffingImpact()
+    kw = dict(dt=0.01, paths=32, t_end=100.0, t_burn=10.0, xy_bins=(10, 10), chunk_paths=4, seed=4)
+    full = simulate_ensemble(model, "milstein", **kw)
+    # a checkpoint holding only the first 3 chunks, as an interrupted run leaves it
+    part = simulate_ensemble(model, "milstein", checkpoint=tmp_path, checkpoint_every=1, **kw)
+    keep = part.chunk_ids < 3
+    trimmed = EnsembleStatistics(part.settings, full.h_counts * 0, full.xy_counts * 0, full.v_counts * 0,
+                                 part.chunk_ids[keep], part.chunk_paths[keep], part.chunk_counts[keep],
+                                 part.chunk_sums[keep])
+    one = simulate_ensemble(model, "milstein", **{**kw, "paths": 12})  # the same first 3 chunks
+    trimmed.h_counts[:] = one.h_counts
+    trimmed.xy_counts[:] = one.xy_counts
+    trimmed.v_counts[:] = one.v_counts
+    from hybrid.stochastic._runner import _write_checkpoint
+
+    _write_checkpoint(tmp_path, trimmed)
+    resumed = simulate_ensemble(model, "milstein", checkpoint=tmp_path, resume=True, **kw)
+    for f in ("h_counts", "xy_counts", "v_counts", "chunk_counts", "chunk_sums", "chunk_ids"):
+        assert np.array_equal(getattr(resumed, f), getattr(full, f)), f
+    with pytest.raises(ParameterError, match="other settings"):
+        simulate_ensemble(model, "milstein", checkpoint=tmp_path, resume=True, **{**kw, "seed": 5})
+    with pytest.raises(ParameterError, match="exists"):
+        simulate_ensemble(model, "milstein", checkpoint=tmp_path, **kw)
+
+
+CLI = ["mc", "--model", "duffing", "--param", "a=1", "--param", "b=0.2", "--param", "c=0.025", "--param", "D=0.05",
+       "--param", "delta=1.0", "--restitution", "ma:vc=0.4", "--scheme", "milstein", "--seed", "1", "--h-max", "4",
+       "--bins", "400"]
+
+
+def test_cli_killed_run_resumes_bitwise(tmp_path):
+    args = CLI + ["--dt", "2e-3", "--paths", "96", "--t-end", "1500", "--t-burn", "100", "--chunk-paths", "2",
+                  "--checkpoint-every", "1"]
+    vibro(args + ["--out", str(tmp_path / "full.csv")])  # uninterrupted, in process (also warms the cache)
+    ck = tmp_path / "ck"
+    entry = "import sys; from hybrid.cli import main; sys.exit(main(sys.argv[1:]))"
+    cmd = [sys.executable, "-c", entry] + args + ["--out", str(tmp_path / "res.csv"), "--checkpoint", str(ck)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    while not (ck / "mc_checkpoint.npz").exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    proc.kill()
+    proc.wait()
+    assert (ck / "mc_checkpoint.npz").exists()
+    with np.load(ck / "mc_checkpoint.npz") as d:
+        done = len(d["chunk_ids"])
+    assert 0 < done < 48, "the kill came too late to test a resume"
+    assert vibro(args + ["--out", str(tmp_path / "res.csv"), "--checkpoint", str(ck), "--resume"]) == 0
+    assert (tmp_path / "res.csv").read_bytes() == (tmp_path / "full.csv").read_bytes()
+
+
+def test_cli_output_and_summary(tmp_path, capsys):
+    out, joint = tmp_path / "h.csv", tmp_path / "j.csv"
+    args = CLI + ["--dt", "1e-2", "--paths", "16", "--t-end", "200", "--t-burn", "20"]
+    assert vibro(args + ["--out", str(out), "--joint", str(joint), "--xy-bins", "10", "12"]) == 0
+    import pandas as pd
+
+    df = pd.read_csv(out)
+    assert list(df.columns) == ["H_lo", "H_hi", "count", "density"] and len(df) == 400
+    assert (df.density * (df.H_hi - df.H_lo)).sum() == pytest.approx(1.0)
+    assert len(pd.read_csv(joint)) == 120
+    text = capsys.readouterr().out
+    for key in ("M path-steps/s", "E[H]", "P(H < G(delta))", "impacts/time", "±"):
+        assert key in text
+
+
+@pytest.mark.parametrize("bad,reason", [
+    (["--dt=-1e-3"], "dt=-0.001"), (["--dt", "0.5"], "too large"), (["--paths", "0"], "paths=0"),
+    (["--t-burn", "300"], "t_burn"), (["--param", "D=-0.1"], "D=-0.1"), (["--param", "delta=-1"], "delta=-1"),
+    (["--resume"], "--checkpoint"), (["--bins", "0"], "bins=0"),
+])
+def test_cli_bad_input_exits_2_with_one_line(bad, reason, tmp_path, capsys):
+    args = CLI + ["--dt", "1e-2", "--paths", "4", "--t-end", "200", "--t-burn", "20", "--out", str(tmp_path / "h.csv")]
+    assert vibro(args + bad) == 2
+    err = capsys.readouterr().err.strip()
+    assert reason in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "h.csv").exists()
+
+
+def test_dask_local_cluster_gives_the_thread_numbers():
+    pytest.importorskip("distributed")
+    model = DuffingImpact()
+    kw = dict(dt=0.01, paths=16, t_end=200.0, t_burn=10.0, seed=2, xy_bins=None, chunk_paths=4)
+    local = simulate_ensemble(model, "splitting", **kw)
+    remote = simulate_ensemble(model, "splitting", scheduler="dask", **kw)
+    for f in ("h_counts", "v_counts", "chunk_counts", "chunk_sums"):
+        assert np.array_equal(getattr(local, f), getattr(remote, f)), f
