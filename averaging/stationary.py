@@ -69,6 +69,11 @@ def check_confinement(model, method: ImpactMethod, h_max: float, nodes: int = DE
     H = np.array([1.0, 1.001, 10.0, 10.01, 100.0, 100.1]) * h_max
     coef = averaged_coefficients(model, H, method if not method.jumps else "exact-two-impact", nodes)
     s2 = coef.diffusion
+    if not np.all(s2 > 0):
+        raise NormalisationError(
+            "the averaged diffusion sigma2_bar(H) is not positive at large H: the model has no noise there "
+            "(D = 0?). The stationary density needs noise; set a positive intensity D"
+        )
     slope = (2.0 * coef.drift[::2] - np.diff(s2)[::2] / np.diff(H)[::2]) / s2[::2]
     if np.all(slope > 0):
         raise NormalisationError(
