@@ -92,7 +92,7 @@ class ExactTwoImpactMethod(ImpactMethod):
             v = _solve_increasing(lambda v: law.coefficient(v) * v, b)
             if v is not None:
                 out.add(v)
-        return sorted(out)
+        return _dedupe(out)
 
 
 class JumpMethod(ImpactMethod):
@@ -139,6 +139,14 @@ def get_method(method) -> ImpactMethod:
     return METHODS[method]
 
 
+def _dedupe(values, rel: float = 1e-9) -> list[float]:
+    out: list[float] = []
+    for v in sorted(values):
+        if not out or v > out[-1] * (1.0 + rel):
+            out.append(v)
+    return out
+
+
 def _law_breakpoints(law) -> list[float]:
     import sympy as sp
 
@@ -151,14 +159,14 @@ def _law_breakpoints(law) -> list[float]:
     try:
         expr = law.expression(SPEED)
     except Exception:  # callable laws: no symbolic kinks known
-        return sorted(out)
+        return _dedupe(out)
     for pw in expr.atoms(sp.Piecewise):
         for _, cond in pw.args:
             for rel in cond.atoms(sp.core.relational.Relational):
                 for side in (rel.lhs, rel.rhs):
                     if side.is_number and float(side) > 0:
                         out.add(float(side))
-    return sorted(out)
+    return _dedupe(out)
 
 
 def _solve_increasing(fun, target, lo=0.0, hi=1.0):

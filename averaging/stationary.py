@@ -404,6 +404,11 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
 
         log_p = np.log(r) + chain.logp0_nodes - logZ
         qH, qw = chain.Hq, chain.wq
-    if not np.all(np.isfinite(log_p[1:])):
-        raise NormalisationError("p(H) is not finite on the grid; increase points or check the model's parameters")
-    return StationaryDensity(model, m, tab, H, log_p, log_density, qH, qw)
+    sd = StationaryDensity(model, m, tab, H, log_p, log_density, qH, qw)
+    stats = (sd.mean_energy, sd.mean_x2, sd.prob_below_barrier, sd.impact_rate, sd.total_mass)
+    if not (np.all(np.isfinite(log_p[1:])) and np.all(np.isfinite(stats)) and abs(sd.total_mass - 1) < 1e-6):
+        raise NormalisationError(
+            f"p(H) could not be normalised accurately (total mass {sd.total_mass!r}); increase points or check "
+            "the model's parameters"
+        )
+    return sd

@@ -51,6 +51,15 @@ def _converged(c: np.ndarray, scale: float) -> bool:
     return bool(tail <= _TOL * max(scale, np.max(np.abs(c))))
 
 
+def _edges(cuts, U):
+    """0, the cuts strictly inside (0, U) without near-duplicates, and U."""
+    edges = [0.0]
+    for u in sorted(cuts):
+        if edges[-1] + 1e-9 * U < u < U * (1 - 1e-9):
+            edges.append(float(u))
+    return edges + [float(U)]
+
+
 class Cheb:
     """A Chebyshev series on [a, b].
 
@@ -198,7 +207,7 @@ class EnergyTable:
             return self._loss_cache[key]
         Gd = self.G_delta
         cuts = [v / np.sqrt(2.0) for v in method.speed_breakpoints(law)]
-        edges = [0.0] + [u for u in cuts if 0.0 < u < self.U] + [self.U]
+        edges = _edges(cuts, self.U)
         pieces = []
         total = 0.0
         logB = self.high["logB"]
@@ -291,7 +300,7 @@ class EnergyTable:
         with np.errstate(divide="ignore", invalid="ignore"):
             weights.append(w * (0.5 * H1) ** (self.nu + 1.0) / nodes[-1] ** self.nu)
         if self.has_impacts:
-            edges = [0.0] + sorted(u for u in cuts if 0 < u < self.U) + [self.U]
+            edges = _edges(cuts, self.U)
             tl, wl = _gauss(n)
             for a, b in zip(edges[:-1], edges[1:]):
                 u = 0.5 * (a + b) + 0.5 * (b - a) * tl

@@ -348,3 +348,13 @@ def test_pandas_output():
     assert df.attrs["method"] == "exact-two-impact"
     coef = averaged_coefficients(DuffingImpact(), [0.3, 0.9], "jump").to_pandas()
     assert coef["jump_rate"].iloc[0] == 0.0 and coef["jump_rate"].iloc[1] > 0
+
+
+def test_exact_two_impact_with_coincident_kinks_is_normalised():
+    # for the Ma law the second-impact kink e(v) v = vc falls on v = vc itself (regression: a zero-width piece)
+    m = DuffingImpact(restitution=Ma(vc=0.05)).with_params(delta=0.6, D=0.01)
+    a = stationary_density(m, "exact-two-impact", points=400)
+    b = stationary_density(m, "paper", points=400)
+    assert a.total_mass == pytest.approx(1.0, abs=1e-12)
+    assert a.mean_energy == pytest.approx(b.mean_energy, rel=0.05)
+    assert np.all(np.isfinite(a.p))
