@@ -394,3 +394,12 @@ def test_dask_local_cluster_gives_the_thread_numbers():
     remote = simulate_ensemble(model, "splitting", scheduler="dask", **kw)
     for f in ("h_counts", "v_counts", "chunk_counts", "chunk_sums"):
         assert np.array_equal(getattr(local, f), getattr(remote, f)), f
+
+
+def test_example_03_runs_headless_and_checks_itself(tmp_path):
+    script = os.path.join(os.path.dirname(__file__), "..", "examples", "03_stochastic_ensemble.py")
+    res = subprocess.run([sys.executable, script, "--outdir", str(tmp_path), "--paths", "128"], capture_output=True,
+                         text=True, timeout=120, env=dict(os.environ, MPLBACKEND="Agg"))
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "OK" in res.stdout
+    assert (tmp_path / "03_stochastic_ensemble.png").stat().st_size > 10_000

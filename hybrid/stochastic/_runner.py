@@ -404,8 +404,8 @@ def _run_dask(job, pending, states, scheduler, accept) -> None:
     else:
         client = scheduler
     try:
-        job_f = client.scatter(job, broadcast=True)
-        futures = [client.submit(_remote_run, job_f, np.array([k]), states[[k]], pure=False, retries=3,
+        # the job travels inside each task (a few kB): scattered data would be lost with a killed worker
+        futures = [client.submit(_remote_run, job, np.array([k]), states[[k]], pure=False, retries=3,
                                  key=f"vibro-mc-{job.name}-{job.seed}-{k}-{os.getpid()}-{time.time_ns()}")
                    for k in pending]
         for fut in as_completed(futures):

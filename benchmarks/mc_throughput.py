@@ -1,0 +1,187 @@
+"""Monte Carlo throughput and time-to-accuracy against the baseline kernel, measured in the same run.
+
+    python benchmarks/mc_throughput.py            # about two minutes on 2 cores
+    python benchmarks/mc_throughput.py --quick    # smaller sizes
+
+1. Throughput on Example 1 with impacts (a=1, b=0.2, c=0.025, D=0.05, delta=1, Ma V_C=0.4, dt=1e-3), histogram of H
+   with 400 bins up to 4, both kernels on the same paths and steps, interleaved repetitions (the machine's speed
+   drifts); prints M path-steps/s of both and the ratio. Compilation is excluded on both sides.
+2. Compile time of our kernel: cold (empty cache directory, in a fresh process) and warm (second process).
+3. Time-to-accuracy: elastic walls (e = 1, delta = 1, same parameters): rounds of 256 paths (new seeds, merged)
+   until the L1 distance of p(H) (40 bins on [0, 4], both normalised there) to the exact density
+   (tests/problems.py ElasticStationary.energy_density) is <= 0.01. Our splitting scheme at a large step, timed
+   from nothing in a fresh process with an empty cache (compilation included) and with a warm cache; the baseline
+   kernel at dt = 1e-3 (compilation excluded).
+
+The baseline is ../shared/baselines/mc_baseline.py relative to the repository root (run, not copied).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE = ROOT.parent / "shared" / "baselines" / "mc_baseline.py"
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+PARAMS = dict(a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0)
+L1_BINS, H_MAX, TARGET = 40, 4.0, 0.01
+
+
+def load_baseline():
+    if not BASELINE.exists():
+        sys.exit(f"baseline kernel not found at {BASELINE}")
+    spec = importlib.util.spec_from_file_location("mc_baseline", BASELINE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def exact_bins():
+    """Exact P(H in bin), 40 bins on [0, 4], Simpson per bin, renormalised on [0, 4]."""
+    from problems import elastic_duffing
+
+    model, exact = elastic_duffing(**PARAMS)
+    e = np.linspace(0.0, H_MAX, L1_BINS + 1)
+    lo, hi = e[:-1], e[1:]
+    pts = np.maximum(np.concatenate([lo, 0.5 * (lo + hi), hi]), 1e-9)
+    d = exact.energy_density(pts, model.barrier_energy)
+    n = L1_BINS
+    q = (hi - lo) / 6 * (d[:n] + 4 * d[n:2 * n] + d[2 * n:])
+    return q / q.sum()
+
+
+def l1(counts, q):
+    c = np.asarray(counts, dtype=float).reshape(L1_BINS, -1).sum(axis=1)
+    return float(np.abs(c / c.sum() - q).sum())
+
+
+# ------------------------------------------------------------------------------------------------ 1. throughput
+def throughput(paths, t_end, reps):
+    import numba
+
+    from hybrid.stochastic import simulate_ensemble
+    from models import DuffingImpact, Ma
+
+    mb = load_baseline()
+    model = DuffingImpact(restitution=Ma(0.4), **PARAMS)
+    dt, t_burn = 1e-3, 100.0
+    n, nburn = int(round(t_end / dt)), int(round(t_burn / dt))
+    mb.run(2, 10, dt, 1.0, 0.2, 0.025, 0.05, 1.0, 0.4, 1, 1, 10, 4.0)  # compile the baseline
+    kw = dict(dt=dt, paths=paths, t_end=t_end, t_burn=t_burn, h_max=H_MAX, bins=400, xy_bins=None, seed=1)
+    simulate_ensemble(model, "milstein", **{**kw, "paths": 8, "t_end": 2.0, "t_burn": 1.0})  # compile/load ours
+    simulate_ensemble(model, "splitting", **{**kw, "paths": 8, "t_end": 2.0, "t_burn": 1.0})
+    rows = {"baseline": [], "milstein": [], "splitting": [], "milstein stride 4": []}
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        mb.run(paths, n, dt, 1.0, 0.2, 0.025, 0.05, 1.0, 0.4, 1, nburn, 400, H_MAX)
+        rows["baseline"].append(paths * n / (time.perf_counter() - t0) / 1e6)
+        for label, scheme, stride in (("milstein", "milstein", 1), ("splitting", "splitting", 1),
+                                      ("milstein stride 4", "milstein", 4)):
+            s = simulate_ensemble(model, scheme, stride=stride, **kw)
+            assert s.violations == 0
+            rows[label].append(s.throughput / 1e6)
+    print(f"\n1. Throughput, Example 1 with Ma impacts, dt=1e-3, {paths} paths x {n} steps, 400 H bins, "
+          f"{numba.get_num_threads()} threads, best of {reps} interleaved runs (M path-steps/s):")
+    base = max(rows["baseline"])
+    for label, vals in rows.items():
+        ratio = "" if label == "baseline" else f"   ratio vs baseline {max(vals) / base:.2f}x (median of runs " \
+            f"{np.median(np.array(vals) / np.array(rows['baseline'])):.2f}x)"
+        print(f"   {label:18s} {max(vals):7.1f}  (runs: {', '.join(f'{v:.0f}' for v in vals)}){ratio}")
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------ 2./3. fresh process
+_CHILD = r"""
+import json, sys, time, warnings
+t_start = time.perf_counter()
+import numpy as np
+sys.path.insert(0, {tests!r})
+from hybrid.stochastic import simulate_ensemble
+from models import DuffingImpact, Elastic
+t_import = time.perf_counter()
+q = np.array({q!r})
+model = DuffingImpact(restitution=Elastic(), **{params!r})
+merged, rounds, t0 = None, 0, time.perf_counter()
+while True:
+    s = simulate_ensemble(model, {scheme!r}, dt={dt!r}, paths=256, t_end=1100.0, t_burn=100.0, h_max=4.0, bins=400,
+                          xy_bins=None, seed=1000 + rounds)
+    if rounds == 0:
+        compile_time = s.compile_time
+    merged = s if merged is None else merged.merge(s)
+    rounds += 1
+    c = merged.h_counts.reshape({bins}, -1).sum(axis=1)
+    dist = float(np.abs(c / c.sum() - q).sum())
+    if dist <= {target} or rounds >= 16:
+        break
+print(json.dumps(dict(import_s=t_import - t_start, compile_s=compile_time, total_s=time.perf_counter() - t0,
+                      rounds=rounds, l1=dist, path_steps=merged.path_steps)))
+"""
+
+
+def fresh_process(scheme, dt, q, cache):
+    code = _CHILD.format(tests=str(ROOT / "tests"), q=q.tolist(), params=PARAMS, scheme=scheme, dt=dt,
+                         bins=L1_BINS, target=TARGET)
+    env = {**os.environ, "VIBRO_CACHE_DIR": cache}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+    if out.returncode:
+        sys.exit(out.stderr)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def baseline_time_to_accuracy(q, paths):
+    mb = load_baseline()
+    dt, t_end, t_burn = 1e-3, 1100.0, 100.0
+    n, nburn = int(round(t_end / dt)), int(round(t_burn / dt))
+    mb.run(2, 10, dt, 1.0, 0.2, 0.025, 0.05, 1.0, 1e300, 1, 1, 10, 4.0)
+    total, counts, rounds, t0 = 0, np.zeros(400), 0, time.perf_counter()
+    while True:  # vc = 1e300: e = 1 at every speed (elastic walls)
+        counts += mb.run(paths, n, dt, 1.0, 0.2, 0.025, 0.05, 1.0, 1e300, 1000 + rounds, nburn, 400, H_MAX)
+        rounds += 1
+        total += paths * n
+        dist = l1(counts, q)
+        if dist <= TARGET or rounds >= 8:
+            return dict(total_s=time.perf_counter() - t0, rounds=rounds, l1=dist, path_steps=total)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    paths, t_end, reps = (64, 600.0, 2) if args.quick else (256, 1100.0, 3)
+    throughput(paths, t_end, reps)
+
+    q = exact_bins()
+    with tempfile.TemporaryDirectory() as cold:
+        first = fresh_process("splitting", 0.035, q, cold)
+        second = fresh_process("splitting", 0.035, q, cold)
+        mil = fresh_process("milstein", 0.01, q, cold)
+    print("\n2. Compile time of the splitting kernel (generation + numba), fresh process:")
+    print(f"   cold (empty cache dir) {first['compile_s']:.2f} s   warm (on-disk cache) {second['compile_s']:.2f} s   "
+          f"(imports {first['import_s']:.2f} s)")
+    print(f"\n3. Time to L1(p(H)) <= {TARGET} on {L1_BINS} bins, elastic walls, against the exact density:")
+    for label, r in (("splitting dt=0.035, cold cache", first), ("splitting dt=0.035, warm cache", second),
+                     ("milstein dt=0.01, cold cache", mil)):
+        print(f"   ours {label:32s} {r['total_s']:6.2f} s incl. compile  ({r['rounds']} x 256 paths, "
+              f"L1 = {r['l1']:.4f}, {r['path_steps']:.3g} path-steps)")
+    b = baseline_time_to_accuracy(q, 256)
+    print(f"   baseline dt=1e-3 (compile excluded)    {b['total_s']:6.2f} s  ({b['rounds']} x 256 paths, "
+          f"L1 = {b['l1']:.4f}, {b['path_steps']:.3g} path-steps)")
+    print(f"   ratio baseline / ours (warm cache)      {b['total_s'] / second['total_s']:.1f}x")
+
+
+if __name__ == "__main__":
+    main()
