@@ -46,18 +46,28 @@ def _level_side(model, H, sign, start):
         lo = np.where(short, hi, lo)
         hi = np.where(short, 2.0 * hi, hi)
     missing = G(sign * hi) < H
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if not np.any((mid > lo) & (mid < hi)):
-            break
-        below = G(sign * mid) < H
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    z = 0.5 * (lo + hi)
-    for _ in range(2):  # Newton polish: G' = g
+    # safeguarded Newton (G' = sign * g > 0 on the bracket): bisect whenever the Newton step leaves [lo, hi]
+    # start from the harmonic guess sqrt(2H/k0) when it lies above the root (hardening), else from the bracket
+    eps = 1e-6 * max(start, 1.0)
+    k0 = float(sign * model.restoring(sign * eps) / eps)
+    z = hi.copy()
+    if k0 > 0:
+        guess = np.clip(np.sqrt(2.0 * np.maximum(H, 0.0) / k0), lo, hi)
+        z = np.where(G(sign * guess) >= H, guess, hi)
+    for _ in range(100):
+        Gz = G(sign * z)
+        over = Gz > H
+        lo = np.where(over, lo, z)
+        hi = np.where(over, z, hi)
         gz = sign * model.restoring(sign * z)
-        step = np.where(gz > 0, (G(sign * z) - H) / np.where(gz > 0, gz, 1.0), 0.0)
-        z = np.where(np.abs(step) < 1e-6 * np.maximum(z, 1e-300) + 1e-300, z - step, z)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            newton = z - (Gz - H) / gz
+        ok = (newton >= lo) & (newton <= hi) & np.isfinite(newton)
+        znew = np.where(ok, newton, 0.5 * (lo + hi))
+        done = ok & (np.abs(znew - z) <= 1e-15 * np.abs(z) + 1e-300)
+        z = znew
+        if done.all():
+            break
     return z, missing
 
 
