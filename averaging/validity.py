@@ -39,32 +39,35 @@ AVERAGING_METHODS = ("paper", "exact-two-impact", "jump")
 
 def _grids(quick: bool) -> dict:
     """name -> (x label, x values, y label, y values, model factory(x, y))."""
-    from models import DuffingImpact, Ma, Newton
+    from models import DuffingImpact, Ma, Newton, RayleighImpact
 
     if quick:
         cs, Ds = [0.025, 0.1, 0.4], [0.01, 0.05, 0.2]
         vcs, deltas = [0.1, 0.4, 1.2], [0.6, 1.0, 1.6]
         es, Des = [0.5, 0.8, 0.95], [0.02, 0.1]
+        k3s, Drs = [0.003, 0.03, 0.1], [0.02, 0.1]
     else:
         cs, Ds = [0.0125, 0.025, 0.05, 0.1, 0.2, 0.4], [0.01, 0.025, 0.05, 0.1, 0.2]
         vcs, deltas = [0.05, 0.1, 0.2, 0.4, 0.8, 1.6], [0.6, 0.8, 1.0, 1.3, 1.6]
         es, Des = [0.3, 0.5, 0.7, 0.8, 0.9, 0.95], [0.01, 0.05, 0.2]
+        k3s, Drs = [0.003, 0.01, 0.03, 0.1], [0.01, 0.03, 0.1]
     return {
         "c_D": ("c", cs, "D", Ds, lambda c, D: DuffingImpact(c=c, D=D)),
         "vc_delta": ("V_C", vcs, "delta", deltas, lambda vc, d: DuffingImpact(restitution=Ma(vc), delta=d)),
         "newton_e": ("e", es, "D", Des, lambda e, D: DuffingImpact(restitution=Newton(e), D=D)),
+        # nonlinear (Rayleigh) damping c y + k3 y^3 with elastic walls: isolates the damping term of the error model
+        "rayleigh_k3": ("k3", k3s, "D", Drs,
+                        lambda k3, D: RayleighImpact(restitution=Ma(1e3), c=0.01, k3=k3, D=D, delta=1.5)),
     }
 
 
 def _mc_settings(model, diag, quick: bool):
-    """Reference Monte Carlo settings: enough relaxation times for an L1 noise of about 0.01."""
-    from .selection import _linear_damping_constant
-
-    c = _linear_damping_constant(model) or 0.05
-    tau = 1.0 / max(c, 1e-3)  # energy relaxation time of the linear damping
+    """Reference Monte Carlo settings: burn-in and length in units of the energy relaxation time."""
+    tau = diag.relaxation_time if np.isfinite(diag.relaxation_time) else 40.0
     paths = 128
     t_sample = min((600.0 if quick else 1500.0) * tau, 24000.0 if quick else 60000.0)
-    return dict(dt=0.01, paths=paths, t_end=t_sample + 5 * tau, t_burn=5 * tau)
+    t_burn = min(max(10.0 * tau, 100.0), 5000.0)
+    return dict(dt=0.01, paths=paths, t_end=t_sample + t_burn, t_burn=t_burn)
 
 
 def averaging_map(name: str, quick: bool = True, seed: int = 3, progress=print):
@@ -112,6 +115,7 @@ def averaging_map(name: str, quick: bool = True, seed: int = 3, progress=print):
                      f"jump={row['l1_jump']:.3f} noise={noise:.3f} r_imp={diag.r_imp:.3f} "
                      f"r_damp90={diag.r_damp_p90:.2f} mc {row['mc_wall']:.1f}s")
     df = pd.DataFrame(rows)
+    df["grid"] = name
     df.attrs.update(x=xl, y=yl, grid=name)
     return df
 
@@ -155,23 +159,28 @@ def plot_averaging_map(df, path, x: str, y: str, title: str = ""):
 
 
 def fit_error_model(frames, quantile: float = 0.9) -> dict:
-    """Fit L1(method, MC) ~ floor + slope * r_imp on the quasi-conservative cells (linear damping only).
+    """Fit L1(method, MC) ~ floor + slope * r_imp + slope_damp * r_damp on the quasi-conservative cells.
 
-    The slope is the ``quantile`` of (L1 - noise - floor) / r_imp over the cells, so that the prediction bounds
-    most calibration cells from above (a chooser must not be optimistic).
+    ``slope`` from the cells with linear damping (where the damping term is absent), then ``slope_damp`` from the
+    cells with nonlinear damping after removing floor + slope * r_imp. Each is the ``quantile`` of the ratios, so
+    that the prediction bounds most calibration cells from above (a chooser must not be optimistic).
     """
     import pandas as pd
 
     df = pd.concat(frames, ignore_index=True)
     df = df[df.quasi_conservative]
+    nonlinear = df["grid"].eq("rayleigh_k3") if "grid" in df else pd.Series(False, index=df.index)
+    floor = float(np.median(df.mc_noise))
     out = {}
     for method in AVERAGING_METHODS:
         col = df[f"l1_{method}"]
-        ok = col.notna() & (df.r_imp > 1e-4)
-        floor = float(np.median(df.mc_noise))
-        excess = (col[ok] - floor).clip(lower=0.0) / df.r_imp[ok]
-        out[method] = {"slope": float(np.quantile(excess, quantile)) if len(excess) else math.nan,
-                       "floor": floor, "cells": int(ok.sum())}
+        lin = col.notna() & ~nonlinear & (df.r_imp > 1e-4)
+        excess = (col[lin] - floor).clip(lower=0.0) / df.r_imp[lin]
+        slope = float(np.quantile(excess, quantile)) if len(excess) else math.nan
+        nl = col.notna() & nonlinear & (df.r_damp > 1e-4)
+        rest = (col[nl] - floor - slope * df.r_imp[nl]).clip(lower=0.0) / df.r_damp[nl]
+        out[method] = {"slope": slope, "slope_damp": float(np.quantile(rest, quantile)) if len(rest) else math.nan,
+                       "floor": floor, "cells": int(lin.sum()), "cells_nonlinear": int(nl.sum())}
     return out
 
 
@@ -311,7 +320,8 @@ def validity_maps(out_dir, quick: bool = False, parts=("averaging", "mc", "orbit
     results = {}
     if "averaging" in parts:
         titles = {"c_D": "Duffing, Ma V_C=0.4, Δ=1", "vc_delta": "Duffing, c=0.025, D=0.05",
-                  "newton_e": "Duffing, Newton e, c=0.025, Δ=1"}
+                  "newton_e": "Duffing, Newton e, c=0.025, Δ=1",
+                  "rayleigh_k3": "Rayleigh c=0.01 + k3 y³, elastic walls Δ=1.5"}
         for name in _grids(quick):
             progress(f"[validity] averaging {name}")
             df = averaging_map(name, quick=quick, progress=progress)
@@ -392,10 +402,12 @@ def solve_verification(out_dir=None, tol: float = 0.02, quick: bool = False, cas
             edges = sol.edges
             h_max = float(edges[-1])
             scheme = pick_scheme(model)
-            tau = 1.0 / max(sol.choice.diagnostics.r_damp / 6.0 if np.isfinite(sol.choice.diagnostics.r_damp)
-                            else 0.02, 0.01)
-            t_end = min(max(200.0 * tau, 4000.0), 16000.0) if quick else min(max(600.0 * tau, 8000.0), 40000.0)
-            stats, ref_noise, ref_wall = _run_halves(model, scheme, 0.005, 256, t_end, 200.0, h_max, seed=4242)
+            tau = sol.choice.diagnostics.relaxation_time
+            tau = tau if np.isfinite(tau) else 100.0
+            t_burn = min(max(200.0, 10.0 * tau), 20000.0)
+            span = min(max(200.0 * tau, 4000.0), 16000.0) if quick else min(max(500.0 * tau, 8000.0), 40000.0)
+            t_end = t_burn + span
+            stats, ref_noise, ref_wall = _run_halves(model, scheme, 0.005, 256, t_end, t_burn, h_max, seed=4242)
             ref = rebin_counts(stats.h_counts, L1_BINS)
             ref = ref / ref.sum()
             actual = float(np.abs(sol.masses - ref).sum())

@@ -2,13 +2,13 @@
 
 ``vibro bench work-precision --out-dir DIR [--quick]`` calls :func:`work_precision`, which writes
 
-* ``mc.csv`` / ``mc.png``: every Monte Carlo scheme (naive flip, Euler-Maruyama and Milstein with located
+* ``workprecision_mc.csv`` / ``.png``: every Monte Carlo scheme (naive flip, Euler-Maruyama and Milstein with located
   crossings, splitting) over a range of dt and paths, on an *elastic* Duffing model whose stationary statistics
   are known in closed form (:class:`ElasticOracle`): L1 of p(H), |Delta E[x^2]| and the impact-rate error, with
   the statistical noise of each run (two independent halves) as a band;
-* ``averaging.csv`` / ``averaging.png``: the averaging methods (paper, exact-two-impact, jump) on Example 1 with
+* ``workprecision_averaging.csv`` / ``.png``: the averaging methods (paper, exact-two-impact, jump) on Example 1 with
   Ma's law, over grid sizes, against a converged Monte Carlo reference, with Monte Carlo itself as a curve;
-* ``deterministic.csv`` / ``deterministic.png``: heyoka and scipy orbits over tolerances: error of the impact
+* ``workprecision_deterministic.csv`` / ``.png``: heyoka and scipy orbits over tolerances: error of the impact
   times (against quadrature of the free quasi-period) and of delta H per impact (eq. 11), cost per impact.
 
 Every CSV has a ``method`` column and one row per (method, setting) with ``wall_time`` (s) and the errors.
@@ -229,12 +229,15 @@ def averaging_work_precision(quick: bool = True, progress=print):
     from averaging import stationary_density
     from models import DuffingImpact
 
+    from .selection import diagnose
+
     model = DuffingImpact()  # Example 1, Fig. 2 parameters with delta = 1.0
-    h_max = 20.0
+    h_max = diagnose(model).h_max  # stationary mass above it < 1e-5
     edges = np.linspace(0.0, h_max, L1_BINS + 1)
     ref, ref_noise, _ = reference_mc(model, h_max, quick, progress=progress)
     ref = ref / ref.sum()
     rows = []
+    stationary_density(model, method="jump", h_max=h_max, points=50)  # warm caches before timing
     for method in ("paper", "exact-two-impact", "jump"):
         for points in (50, 100, 200, 400, 800, 1600, 3200):
             t0 = time.perf_counter()
@@ -300,13 +303,13 @@ def deterministic_work_precision(quick: bool = True, progress=print):
 
 # ----------------------------------------------------------------------------- charts
 
-def _loglog(ax, x, y, label, band=None, marker="o"):
-    order = np.argsort(x)
+def _loglog(ax, x, y, label, band=None, marker="o", sort=True):
+    order = np.argsort(x) if sort else np.arange(len(x))
     x, y = np.asarray(x)[order], np.asarray(y)[order]
     (line,) = ax.loglog(x, y, marker=marker, ms=4, label=label)
     if band is not None:
         b = np.asarray(band)[order]
-        ax.fill_between(x, np.maximum(y - b, y * 0.05), y + b, color=line.get_color(), alpha=0.15, lw=0)
+        ax.fill_between(x, np.maximum(y - b, y / 3.0), y + b, color=line.get_color(), alpha=0.15, lw=0)
 
 
 def plot_mc(df, path):
@@ -318,11 +321,20 @@ def plot_mc(df, path):
 
     ok = df[df.status == "ok"]
     fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    colours = dict(zip(MC_LABELS, ("tab:red", "tab:orange", "tab:blue", "tab:green")))
+    most = ok.paths.max()
     for (scheme, paths), g in ok.groupby(["scheme", "paths"]):
-        lab = f"{MC_LABELS[scheme]}, {paths} paths"
-        _loglog(axes[0], g.wall_time, g.l1, lab, g.l1_noise)
-        _loglog(axes[1], g.wall_time, g.x2_err.clip(lower=1e-5), lab, g.x2_ci)
-        _loglog(axes[2], g.wall_time, g.rate_err.clip(lower=1e-5), lab, g.rate_ci)
+        g = g.sort_values("dt", ascending=False)  # left to right: smaller dt, more work
+        main_line = paths == most
+        kw = dict(color=colours.get(scheme), ls="-" if main_line else ":", marker="o", ms=4 if main_line else 2,
+                  lw=1.5 if main_line else 0.8, label=f"{MC_LABELS[scheme]}, {paths} paths")
+        for ax, col, band in ((axes[0], "l1", "l1_noise"), (axes[1], "x2_err", "x2_ci"),
+                              (axes[2], "rate_err", "rate_ci")):
+            y = g[col].clip(lower=1e-5).to_numpy()
+            ax.loglog(g.wall_time, y, **kw)
+            if main_line:
+                b = g[band].to_numpy()
+                ax.fill_between(g.wall_time, np.maximum(y - b, y / 3.0), y + b, color=kw["color"], alpha=0.12, lw=0)
     for ax, t in zip(axes, ("L1 of p(H) vs exact", "|E[x²] − exact|", "|impact rate − exact|")):
         ax.set_xlabel("wall time [s] (dt decreasing →)")
         ax.set_title(t, fontsize=10)
@@ -343,7 +355,7 @@ def plot_averaging(df, path):
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for method, g in df.groupby("method", sort=False):
-        _loglog(ax, g.wall_time, g.l1, method, g.l1_noise if method.startswith("Monte") else None)
+        _loglog(ax, g.wall_time, g.l1, method, g.l1_noise if method.startswith("Monte") else None, sort=False)
     noise = df.attrs.get("reference_noise")
     if noise:
         ax.axhline(noise, color="grey", ls=":", lw=1, label="reference MC noise")
@@ -409,8 +421,8 @@ def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "dete
         run, plot = runners[part]
         progress(f"[work-precision] {part}")
         df = run(quick=quick, progress=progress)
-        df.to_csv(out / f"{part}.csv", index=False)
-        plot(df, out / f"{part}.png")
+        df.to_csv(out / f"workprecision_{part}.csv", index=False)
+        plot(df, out / f"workprecision_{part}.png")
         results[part] = df
     return results
 
