@@ -23,7 +23,7 @@ from scipy.special import roots_jacobi
 
 from .methods import ImpactMethod
 
-_CELL_NODES = 8
+_CELL_NODES = 5
 
 
 def cell_quadrature(grid, G_delta: float, nu: float, k: int = _CELL_NODES):
@@ -168,20 +168,20 @@ class EnergyChain:
         r = np.ones(n)
         if len(self.jump_from) == 0:
             return r
-        W, kappa = self.W, self.kappa
-        out_rate = np.bincount(self.jump_from, self.jump_rate, minlength=n)
-        order = np.argsort(self.jump_from, kind="stable")
-        starts = np.searchsorted(self.jump_from[order], np.arange(n + 1))
-        to_sorted, rate_sorted = self.jump_to[order], self.jump_rate[order]
-        land = np.zeros(n)
+        W, kappa = self.W.tolist(), self.kappa.tolist()
+        out_rate = np.bincount(self.jump_from, self.jump_rate, minlength=n).tolist()
+        targets: list[list] = [[] for _ in range(n)]
+        for i, j, q in zip(self.jump_from.tolist(), self.jump_to.tolist(), self.jump_rate.tolist()):
+            targets[i].append((j, q))
+        land = [0.0] * n
         J = 0.0
         r_list = r.tolist()
         for i in range(n - 2, -1, -1):
             k = i + 1
             mass = W[k] * r_list[k]
-            s0, s1 = starts[k], starts[k + 1]
-            if s1 > s0:
-                np.add.at(land, to_sorted[s0:s1], mass * rate_sorted[s0:s1])
+            if targets[k]:
+                for j, q in targets[k]:
+                    land[j] += mass * q
                 J += mass * out_rate[k]
             J -= land[k]
             if J < 0.0:

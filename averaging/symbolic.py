@@ -164,6 +164,23 @@ class AveragingEquations:
             "over x in [-A, A], G(A) = H, when H < G(delta); over [-delta, delta] when H > G(delta)",
         ])
 
+    def _repr_latex_(self) -> str:  # Jupyter display
+        return "$$" + self.latex().replace("align", "aligned") + "$$"
+
+    def pretty(self) -> str:
+        """Multi-line 2-D rendering (sympy ``pretty``) of the averaged drift and diffusion below G(delta).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> "T(H)" in averaging_equations(DuffingImpact()).pretty()
+        True
+        """
+        inner = self.averaged(False)
+        return "\n\n".join(f"{name} =\n{sp.pretty(expr, use_unicode=False)}" for name, expr in
+                             (("m_bar(H)", inner["drift"]), ("sigma2_bar(H)", inner["diffusion"]),
+                              ("T(H)", inner["T"])))
+
     def __repr__(self) -> str:
         return f"AveragingEquations({self.model.name!r})"
 

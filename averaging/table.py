@@ -92,6 +92,9 @@ class Cheb:
     def __call__(self, x):
         return C.chebval(self._t(x), self.coef)
 
+    def __rmul__(self, factor: float) -> Cheb:
+        return Cheb(factor * self.coef, self.a, self.b)
+
     def antiderivative(self) -> Cheb:
         """The integral from a to x, as a series."""
         return Cheb(C.chebint(self.coef, lbnd=-1, scl=0.5 * (self.b - self.a)), self.a, self.b)
@@ -233,57 +236,65 @@ class EnergyTable:
         return out
 
     # ------------------------------------------------------------------ evaluation
-    def _split(self, H):
+    def _piecewise(self, H, low_fn, high_fn):
+        """Evaluate ``low_fn(H)`` below G(delta) and ``high_fn(u)`` above it, each only where needed."""
         H = np.asarray(H, dtype=float)
         if np.any(H < 0) or np.any(H > self.h_max * (1 + 1e-12)):
             raise ParameterError(f"energies must lie in [0, h_max={self.h_max:g}]")
+        if not self.has_impacts:
+            return low_fn(H)
         low = H <= self.H1
-        return H, low
+        out = np.empty_like(H)
+        if low.any():
+            out[low] = low_fn(H[low])
+        if not low.all():
+            out[~low] = high_fn(np.sqrt(H[~low] - self.G_delta))
+        return out
+
+    @staticmethod
+    def _sum(*series):
+        n = max(len(c.coef) for c in series)
+        coef = np.zeros(n)
+        for c in series:
+            coef[: len(c.coef)] += c.coef
+        return Cheb(coef, series[0].a, series[0].b)
 
     def period(self, H):
         """T(H) from the table."""
-        H, low = self._split(H)
-        out = np.exp(self.low["logT"](np.minimum(H, self.H1)))
-        if self.has_impacts:
-            u = np.sqrt(np.maximum(H - self.G_delta, 0.0))
-            out = np.where(low, out, np.exp(self.high["logT"](u)))
-        return out
+        return self._piecewise(H, lambda h: np.exp(self.low["logT"](h)), lambda u: np.exp(self.high["logT"](u)))
 
     def diffusion(self, H):
         """sigma2_bar(H) from the table."""
-        H, low = self._split(H)
-        with np.errstate(divide="ignore"):
-            Hl = np.minimum(H, self.H1)
-            out = np.exp(self.low["lam"](Hl) - self.low["logT"](Hl)) * Hl**self.m_exp
-        if self.has_impacts:
-            u = np.sqrt(np.maximum(H - self.G_delta, 0.0))
-            out = np.where(low, out, np.exp(self.high["logB"](u) - self.high["logT"](u)))
-        return out
+        def low(h):
+            with np.errstate(divide="ignore"):
+                return np.exp(self.low["lam"](h) - self.low["logT"](h)) * h**self.m_exp
+
+        return self._piecewise(H, low, lambda u: np.exp(self.high["logB"](u) - self.high["logT"](u)))
 
     def mean_x2(self, H):
         """<x**2> on the level H."""
-        H, low = self._split(H)
-        out = self.low["x2"](np.minimum(H, self.H1))
-        if self.has_impacts:
-            u = np.sqrt(np.maximum(H - self.G_delta, 0.0))
-            out = np.where(low, out, self.high["x2"](u))
-        return out
+        return self._piecewise(H, self.low["x2"], self.high["x2"] if self.has_impacts else None)
 
     def log_density(self, H, method: ImpactMethod | None = None, law=None):
         """Unnormalised log p(H) of eq. 30 (with the method's loss drift, or none for ``method=None``)."""
-        H, low = self._split(H)
-        Hl = np.minimum(H, self.H1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            logH = np.log(Hl)
-            lead = np.where(Hl > 0, self.nu * logH, 0.0 if self.nu == 0 else (np.inf if self.nu < 0 else -np.inf))
-        out = lead + self.phi_reg(Hl) - self.low["lam"](Hl) + self.low["logT"](Hl)
-        if self.has_impacts:
-            u = np.sqrt(np.maximum(H - self.G_delta, 0.0))
-            hi = self.phi_at_G + self.phi2(u) - self.high["logB"](u) + self.high["logT"](u)
+        if not hasattr(self, "_low_logp"):
+            self._low_logp = self._sum(self.phi_reg, -1.0 * self.low["lam"], self.low["logT"])
+            if self.has_impacts:
+                self._high_logp = self._sum(self.phi2, -1.0 * self.high["logB"], self.high["logT"])
+
+        def low(h):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lead = np.where(h > 0, self.nu * np.log(h), 0.0 if self.nu == 0 else (np.inf if self.nu < 0
+                                                                                     else -np.inf))
+            return lead + self._low_logp(h)
+
+        def high(u):
+            out = self.phi_at_G + self._high_logp(u)
             if method is not None and not method.jumps:
-                hi = hi - self.loss_integral(u, method, law)
-            out = np.where(low, out, hi)
-        return out
+                out = out - self.loss_integral(u, method, law)
+            return out
+
+        return self._piecewise(H, low, high)
 
     # ------------------------------------------------------------------ quadrature on [0, h_max]
     def quadrature(self, n: int = 160, cuts=()):
