@@ -16,7 +16,7 @@ import numpy as np
 
 from hybrid.errors import ParameterError
 
-from .symbolic import averaging_equations
+from .symbolic import averaging_equations, fingerprint
 
 DEFAULT_NODES = 64
 """Gauss-Legendre nodes in theta per level (relative error below 1e-12 for the built-in models)."""
@@ -28,6 +28,68 @@ def _gauss(n: int):
     if n not in _GL_CACHE:
         _GL_CACHE[n] = np.polynomial.legendre.leggauss(n)
     return _GL_CACHE[n]
+
+
+class Geometry:
+    """The potential G, the force g, the barriers and G(delta) of a model at its parameter values (numpy).
+
+    Cached per symbolic declaration and parameter values, so that repeated averaging does not touch sympy.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> geo = geometry(DuffingImpact())
+    >>> round(geo.G_delta, 12), geo.barriers
+    (0.55, (-1.0, 1.0))
+    """
+
+    def __init__(self, model):
+        from hybrid.errors import ModelError
+
+        ker = averaging_equations(model).potential_kernels
+        if ker is None:
+            self._G, self._g = model.potential, model.restoring
+        else:
+            Gf, gf, names = ker
+            vals = [model.params[k] for k in names]
+            self._G = lambda x: np.asarray(Gf(x, *vals), dtype=float) + 0.0 * np.asarray(x, dtype=float)
+            self._g = lambda x: np.asarray(gf(x, *vals), dtype=float) + 0.0 * np.asarray(x, dtype=float)
+        self.barriers = tuple(float(b) for b in model.barriers)
+        left, right = self.barriers
+        if np.isfinite(left) and np.isfinite(right):
+            gl, gr = self._G(np.array([left, right]))
+            if abs(gl - gr) > 1e-12 * max(1.0, abs(gl)):
+                model.barrier_energy  # noqa: B018 - raises the model's ModelError for asymmetric impact levels
+                raise ModelError("asymmetric impact levels")  # pragma: no cover
+            self.G_delta = float(gr)
+        elif np.isfinite(left) or np.isfinite(right):
+            model.barrier_energy  # noqa: B018 - one-sided barriers: the model explains why this is refused
+            raise ModelError("one-sided barriers are not supported by the averaging")  # pragma: no cover
+        else:
+            self.G_delta = float("inf")
+        self.has_barriers = bool(np.isfinite(self.G_delta))
+
+    def potential(self, x):
+        """G(x)."""
+        return self._G(x)
+
+    def restoring(self, x):
+        """g(x)."""
+        return self._g(x)
+
+
+_GEOMETRY: dict = {}
+
+
+def geometry(model) -> Geometry:
+    """The cached :class:`Geometry` of ``model`` (keyed by declaration and parameter values)."""
+    key = (fingerprint(model), tuple(sorted(model.params.items())), model.barrier_exprs is None)
+    geo = _GEOMETRY.get(key)
+    if geo is None:
+        if len(_GEOMETRY) > 64:
+            _GEOMETRY.clear()
+        geo = _GEOMETRY[key] = Geometry(model)
+    return geo
 
 
 def _level_side(model, H, sign, start):
@@ -92,14 +154,15 @@ def turning_points(model, H):
     [-1.0, 1.0]
     """
     H = np.atleast_1d(np.asarray(H, dtype=float))
-    left, right = model.barriers
+    geo = geometry(model)
+    left, right = geo.barriers
     out = []
     for sign, bound in ((-1.0, left), (+1.0, right)):
-        z, missing = _level_side(model, H, sign, 0.0)
+        z, missing = _level_side(geo, H, sign, 0.0)
         if np.isfinite(bound) and missing.any():
             b = abs(bound)
-            Gb = float(model.potential(sign * b))
-            gb = float(sign * model.restoring(sign * b))
+            Gb = float(geo.potential(sign * b))
+            gb = float(sign * geo.restoring(sign * b))
             lin = b + (H - Gb) / gb
             z = np.where(missing & (H > Gb), lin, z)
             missing = missing & ~(H > Gb)
@@ -135,19 +198,20 @@ class OrbitNodes:
             bad = H[~(np.isfinite(H) & (H > 0))][0]
             raise ParameterError(f"orbit integrals need finite energies H > 0, got H={bad!r}")
         self.H = H
+        geo = geometry(model)
         lo, hi = turning_points(model, H)
         c = 0.5 * (hi + lo)
         r = 0.5 * (hi - lo)
-        left, right = model.barriers
+        left, right = geo.barriers
         th_lo = np.where(lo < left, np.arcsin(np.clip((left - c) / r, -1, 1)), -np.pi / 2)
         th_hi = np.where(hi > right, np.arcsin(np.clip((right - c) / r, -1, 1)), np.pi / 2)
         t, w = _gauss(nodes)
         half = 0.5 * (th_hi - th_lo)
         theta = 0.5 * (th_hi + th_lo)[:, None] + half[:, None] * t[None, :]
         x = c[:, None] + r[:, None] * np.sin(theta)
-        s2 = 2.0 * (H[:, None] - model.potential(x))
+        s2 = 2.0 * (H[:, None] - geo.potential(x))
         # rounding can leave s2 <= 0 at a node next to a turning point: use the local linearisation there
-        gA = np.abs(model.restoring(np.where(theta > 0, hi[:, None], lo[:, None])))
+        gA = np.abs(geo.restoring(np.where(theta > 0, hi[:, None], lo[:, None])))
         lin = 2.0 * gA * np.minimum(hi[:, None] - x, x - lo[:, None])
         s2 = np.where(s2 > 0, s2, np.maximum(lin, 1e-300))
         self.x = x

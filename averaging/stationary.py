@@ -15,11 +15,13 @@ from hybrid.errors import ModelError, NormalisationError, ParameterError
 
 from .jump import EnergyChain
 from .methods import ImpactMethod, get_method
-from .quadrature import DEFAULT_NODES, orbit_integrals
+from .quadrature import DEFAULT_NODES, geometry, orbit_integrals
+from .symbolic import fingerprint
 from .table import EnergyTable
 
 _TABLES: OrderedDict = OrderedDict()
 _TABLES_MAX = 16
+_SINGLE_WELL: set = set()
 
 
 def energy_table(model, h_max: float, nodes: int = DEFAULT_NODES) -> EnergyTable:
@@ -33,7 +35,7 @@ def energy_table(model, h_max: float, nodes: int = DEFAULT_NODES) -> EnergyTable
     >>> energy_table(DuffingImpact(), 4.0) is energy_table(DuffingImpact(), 4.0)
     True
     """
-    key = (model.fingerprint(), tuple(sorted(model.params.items())), float(h_max), int(nodes))
+    key = (fingerprint(model), tuple(sorted(model.params.items())), float(h_max), int(nodes))
     tab = _TABLES.get(key)
     if tab is None:
         tab = EnergyTable(model, h_max, nodes)
@@ -62,10 +64,13 @@ def check_confinement(model, method: ImpactMethod, h_max: float, nodes: int = DE
     ...
     hybrid.errors.NormalisationError: the averaged energy drifts to infinity: ...
     """
-    try:
-        model.check_single_well()
-    except ModelError as exc:
-        raise NormalisationError(f"no stationary density: {exc}") from exc
+    key = (fingerprint(model), tuple(sorted(model.params.items())), model.barrier_exprs is None)
+    if key not in _SINGLE_WELL:
+        try:
+            model.check_single_well()
+        except ModelError as exc:
+            raise NormalisationError(f"no stationary density: {exc}") from exc
+        _SINGLE_WELL.add(key)
     H = np.array([1.0, 1.001, 10.0, 10.01, 100.0, 100.1]) * h_max
     coef = averaged_coefficients(model, H, method if not method.jumps else "exact-two-impact", nodes)
     s2 = coef.diffusion
@@ -150,7 +155,7 @@ def averaged_coefficients(model, H, method="paper", nodes: int = DEFAULT_NODES) 
     T = o["T"]
     drift = o["drift"] / T
     diffusion = o["diffusion"] / T
-    Gd = model.barrier_energy if model.has_barriers else np.inf
+    Gd = geometry(model).G_delta
     excess = np.where(H > Gd, H - Gd, 0.0)
     law = model.restitution
     imp = H > Gd
@@ -375,8 +380,7 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
         raise ParameterError(f"points={points!r} must be an integer >= 3")
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
-    if model.has_barriers:
-        model.barrier_energy  # noqa: B018 - raises ModelError for asymmetric impact levels
+    geometry(model)  # raises ModelError for asymmetric impact levels
     if check:
         check_confinement(model, m, h_max, nodes)
     tab = energy_table(model, h_max, nodes)

@@ -18,6 +18,7 @@ sigma do not depend on the sign of y this is the paper's eq. 21 (2/T times the +
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -195,8 +196,40 @@ class AveragingEquations:
         diffusion = sp.lambdify(args, self._w_diffusion, modules="numpy")
         return _Kernels(drift, diffusion, names)
 
+    @cached_property
+    def potential_kernels(self):
+        """(G, g) as numpy functions of (x, *parameter values); None when G has no closed form."""
+        G = self.model.potential_expr
+        if G is None:
+            return None
+        names = tuple(self.model.params)
+        args = [X, *[self.model.parameter_symbols[k] for k in names]]
+        return (sp.lambdify(args, G, modules="numpy"), sp.lambdify(args, self.model.g, modules="numpy"), names)
+
 
 _CACHE: dict[str, AveragingEquations] = {}
+_FINGERPRINTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def fingerprint(model) -> str:
+    """``model.fingerprint()``, memoised per model object (printing sympy expressions is slow).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> m = DuffingImpact()
+    >>> fingerprint(m) == m.fingerprint()
+    True
+    """
+    try:
+        return _FINGERPRINTS[model]
+    except (KeyError, TypeError):
+        fp = model.fingerprint()
+        try:
+            _FINGERPRINTS[model] = fp
+        except TypeError:  # not weak-referenceable
+            pass
+        return fp
 
 
 def averaging_equations(model) -> AveragingEquations:
@@ -217,7 +250,7 @@ def averaging_equations(model) -> AveragingEquations:
     >>> averaging_equations(m).drift          # Wong-Zakai term D*y
     D*y - c*y - x
     """
-    key = model.fingerprint()
+    key = fingerprint(model)
     eq = _CACHE.get(key)
     if eq is None:
         eq = AveragingEquations(model)

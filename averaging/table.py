@@ -17,7 +17,7 @@ from scipy.special import roots_jacobi
 from hybrid.errors import NormalisationError, ParameterError
 
 from .methods import ImpactMethod
-from .quadrature import DEFAULT_NODES, _gauss, orbit_integrals
+from .quadrature import DEFAULT_NODES, _gauss, geometry, orbit_integrals
 
 _SIZES = (17, 33, 65, 129, 257, 513)
 _TOL = 1e-13
@@ -135,7 +135,7 @@ class EnergyTable:
         self.model = model
         self.h_max = float(h_max)
         self.nodes = nodes
-        self.G_delta = model.barrier_energy
+        self.G_delta = geometry(model).G_delta
         self.H1 = min(self.G_delta, self.h_max)
         self._fit_low()
         self.has_impacts = self.h_max > self.G_delta
