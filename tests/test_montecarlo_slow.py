@@ -59,7 +59,7 @@ def _biases(scheme, dts, quantity, paths, t_end, seed):
 
 @pytest.mark.parametrize("scheme,quantity,dts", [
     ("splitting", "mean_x2", [0.4, 0.2, 0.1]),
-    ("splitting", "mean_y2", [0.4, 0.2, 0.1]),
+    ("splitting", "mean_y2", [0.4, 0.28, 0.2]),
     ("milstein", "impact_rate", [0.2, 0.1, 0.05, 0.025]),
     ("em", "mean_x2", [0.1, 0.05, 0.025]),
 ])

@@ -17,6 +17,7 @@ from ._runner import (
     check_step,
     default_chunk_paths,
     drive_paths,
+    sample_paths,
     simulate_ensemble,
     speed_scale,
 )
@@ -27,5 +28,5 @@ __all__ = [
     "SCHEMES", "EnsembleStatistics", "Estimate", "EulerMaruyama", "Kernel", "Milstein", "NaiveFlip", "Scheme",
     "Splitting", "StepSizeWarning", "atomic_write_text", "build_kernel", "cache_dir", "check_step", "chunk_states",
     "default_chunk_paths", "drive_paths", "generate_source", "get_scheme", "normals", "ratio_estimate",
-    "simulate_ensemble", "speed_scale", "ziggurat_tables",
+    "sample_paths", "simulate_ensemble", "speed_scale", "ziggurat_tables",
 ]

@@ -438,3 +438,43 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     left, right = model.barriers
     return kern.integrate_normals(np.full(n, float(x0[0])), np.full(n, float(x0[1])), z, float(dt), prm,
                                   np.array(kern.law_values, dtype=float), float(left), float(right))
+
+
+def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=10, seed=1, x0=(0.0, 0.0),
+                 check_dt=True):
+    """Store a few paths: times (n,), x and y (paths, n) every ``every`` steps, for plots and checks.
+
+    The ensemble statistics never store paths; this draws from its own stream (``SeedSequence(seed)``), so the
+    paths are not members of a :func:`simulate_ensemble` run with the same seed. At most 10**7 stored values.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> t, x, y = sample_paths(DuffingImpact(), "splitting", dt=0.01, t_end=1.0, paths=2,
+    ...                        every=10)  # doctest: +SKIP
+    >>> x.shape  # doctest: +SKIP
+    (2, 11)
+    """
+    sch = get_scheme(scheme)
+    paths = _positive_int("paths", paths)
+    every = _positive_int("every", every)
+    if not (math.isfinite(dt) and dt > 0 and math.isfinite(t_end) and t_end > 0):
+        raise ParameterError(f"dt={dt!r} and t_end={t_end!r} must be finite and positive")
+    nstep = int(round(t_end / dt))
+    if nstep < every:
+        raise ParameterError(f"t_end={t_end:g} holds fewer than every={every} steps of dt={dt:g}")
+    if paths * (nstep // every + 1) * 2 > 10**7:
+        raise ParameterError("too many stored values (> 1e7); raise every or lower paths / t_end")
+    left, right = model.barriers
+    if not (left <= x0[0] <= right):
+        raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
+    if check_dt:
+        check_step(model, dt)
+    kern = _codegen.build_kernel(model, sch, warm=False)
+    zx, zk, zf = _rng.ziggurat_tables()
+    state = _rng.chunk_states(seed, 1)[0].copy()
+    prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
+    out = kern.record_paths(state, paths, nstep, every, float(dt), float(x0[0]), float(x0[1]), prm,
+                            np.array(kern.law_values, dtype=float), float(left), float(right), zx, zk, zf)
+    t = np.arange(out.shape[1]) * every * dt
+    return t, out[:, :, 0], out[:, :, 1]
