@@ -115,9 +115,10 @@ def l1_table(paths=512, t_end=4200.0, t_burn=200.0, dt=1e-3, bins=100, seed=7):
         edges = stats.h_edges
         mc = stats.h_counts / stats.h_counts.sum()
         # MC noise floor: L1 between two independent halves' estimate ~ sqrt(2/pi) * sum sd; use half-split
-        dists = {}
+        dists, moments = {}, {}
         for method in ("paper", "exact-two-impact", "jump"):
             sd = stationary_density(model, method, h_max=h_max, points=2001)
+            moments[method] = (sd.mean_energy, sd.impact_rate, sd.prob_below_barrier)
             t, w = np.polynomial.legendre.leggauss(8)
             mid = 0.5 * (edges[:-1] + edges[1:])[:, None]
             half = 0.5 * np.diff(edges)[:, None]
@@ -128,6 +129,12 @@ def l1_table(paths=512, t_end=4200.0, t_burn=200.0, dt=1e-3, bins=100, seed=7):
               f"{dists['exact-two-impact']:8.4f} {dists['jump']:8.4f} {noise:8.4f} "
               f"{dists['paper'] / dists['jump']:10.2f}")
         out.append((name, params, vc, dists, noise))
+        print(f"{'':8s} E[H]: MC {stats.mean_energy.value:.4f}+-{stats.mean_energy.ci:.4f} "
+              + " ".join(f"{k} {v[0]:.4f}" for k, v in moments.items()))
+        print(f"{'':8s} impact rate: MC {stats.impact_rate.value:.4f}+-{stats.impact_rate.ci:.4f} "
+              + " ".join(f"{k} {v[1]:.4f}" for k, v in moments.items()))
+        print(f"{'':8s} P(H<G): MC {stats.prob_below_barrier.value:.4f}+-{stats.prob_below_barrier.ci:.4f} "
+              + " ".join(f"{k} {v[2]:.4f}" for k, v in moments.items()))
     return out
 
 

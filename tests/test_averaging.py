@@ -358,3 +358,14 @@ def test_exact_two_impact_with_coincident_kinks_is_normalised():
     assert a.total_mass == pytest.approx(1.0, abs=1e-12)
     assert a.mean_energy == pytest.approx(b.mean_energy, rel=0.05)
     assert np.all(np.isfinite(a.p))
+
+
+def test_jump_chain_converges_at_second_order_in_the_grid():
+    m = DuffingImpact()
+    Hf = np.linspace(0, 4, 2001)
+    ref = stationary_density(m, "jump", points=4001).density(Hf)
+    err = [np.trapezoid(np.abs(stationary_density(m, "jump", points=n).density(Hf) - ref), Hf)
+           for n in (251, 501, 1001)]
+    orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    assert np.all(orders > 1.8), orders
+    assert err[-1] < 1e-5
