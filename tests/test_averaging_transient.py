@@ -65,3 +65,33 @@ def test_transient_bad_input():
         transient_density(_linear(), 1.0, [0.0, 1.0], h_max=30.0, scheme="rk4")
     with pytest.raises(ParameterError, match="increasing"):
         transient_density(_linear(), 1.0, [1.0, 0.0], h_max=30.0)
+
+
+def test_mfpt_with_impacts_matches_the_quadrature_formula_on_direct_coefficients():
+    # Duffing with Ma impacts, paper method: the backward-equation solve on the chain against the 1-D formula
+    # MFPT = int_0^Hc 2/(s2 p_s) int_0^z p_s, evaluated on a fine grid from directly averaged coefficients
+    from averaging import averaged_coefficients
+
+    model = DuffingImpact()
+    Hc = 1.5
+    Gd = model.barrier_energy
+    # below G(delta) integrate in H; above it in u = sqrt(H - G(delta)), where the coefficients are smooth
+    z1 = np.linspace(0.0, Gd, 3001)[1:]
+    u = np.linspace(0.0, math.sqrt(Hc - Gd), 3001)[1:]
+    z2 = Gd + u * u
+
+    def cumulative(g1, g2):
+        """int_0^z g dH on z1 then z2 (first panels by the rectangle rule at the first node)."""
+        a = integrate.cumulative_simpson(g1, x=z1, initial=0.0) + g1[0] * z1[0]
+        b = a[-1] + integrate.cumulative_simpson(g2 * 2 * u, x=u, initial=0.0) + g2[0] * u[0] ** 2
+        return a, b
+
+    c1, c2 = averaged_coefficients(model, z1, "paper"), averaged_coefficients(model, z2, "paper")
+    f1, f2 = 2 * c1.drift / c1.diffusion - 1 / z1, 2 * c2.drift / c2.diffusion - 1 / z2  # regular at 0
+    phi1, phi2 = cumulative(f1, f2)
+    ps1, ps2 = np.exp(phi1 + np.log(z1)) / c1.diffusion, np.exp(phi2 + np.log(z2)) / c2.diffusion
+    in1, in2 = cumulative(ps1, ps2)
+    out1, out2 = cumulative(2 * in1 / (c1.diffusion * ps1), 2 * in2 / (c2.diffusion * ps2))
+    exact = out2[-1]
+    got = mean_first_passage_time(model, Hc, 0.0, method="paper", points=1500)
+    assert got == pytest.approx(exact, rel=1e-5)
