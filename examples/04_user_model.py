@@ -1,6 +1,7 @@
 """A user-defined model in a few lines: a hardening-softening spring between barriers, p(H) by averaging.
 
 Run:  python examples/04_user_model.py      (headless, a few seconds; exits 1 if the self-check fails)
+Or from the command line:  vibro pdf --model examples/04_user_model.py:HardeningSoftening --out p.csv
 """
 
 import sys
@@ -23,22 +24,31 @@ class HardeningSoftening(ImpactOscillator):
                          restitution=restitution or Ma(vc=0.3))
 
 
-model = HardeningSoftening()
-print(averaging_equations(model))
-for method in ("paper", "jump"):
-    sd = stationary_density(model, method, h_max=5.0, points=1000)
-    print(f"{method:6s} E[H] = {sd.mean_energy:.4f}  P(no impact) = {sd.prob_below_barrier:.4f}")
+def main() -> int:
+    model = HardeningSoftening()
+    print(averaging_equations(model))
+    for method in ("paper", "jump"):
+        sd = stationary_density(model, method, h_max=5.0, points=1000)
+        print(f"{method:6s} E[H] = {sd.mean_energy:.4f}  P(no impact) = {sd.prob_below_barrier:.4f}")
 
-# Self-check (elastic barriers are exact): p(x) ~ exp(-c G(x) / D) on |x| < delta, computed here by plain quad.
-el = model.with_restitution(Elastic())
-sd = stationary_density(el, "paper", h_max=60.0, points=601)
-c, D, delta = el.params["c"], el.params["D"], el.params["delta"]
-G = lambda x: x * x / 2 + 0.5 * x**4 / 4 - 0.05 * x**6 / 6  # noqa: E731
-Z = integrate.quad(lambda x: np.exp(-c * G(x) / D), -delta, delta, epsrel=1e-12)[0]
-x = np.array([-1.2, 0.0, 0.7, 1.4])
-err = np.max(np.abs(sd.marginal_x(x) / (np.exp(-c * G(x) / D) / Z) - 1))
-print(f"elastic check: max relative error of p(x) = {err:.2e}")
-if not err < 1e-6:
-    print("FAILED")
-    sys.exit(1)
-print("OK")
+    # Self-check (elastic barriers are exact): p(x) ~ exp(-c G(x) / D) on |x| < delta, computed here by plain quad.
+    el = model.with_restitution(Elastic())
+    sd = stationary_density(el, "paper", h_max=60.0, points=601)
+    c, D, delta = el.params["c"], el.params["D"], el.params["delta"]
+
+    def G(x):
+        return x * x / 2 + 0.5 * x**4 / 4 - 0.05 * x**6 / 6
+
+    Z = integrate.quad(lambda x: np.exp(-c * G(x) / D), -delta, delta, epsrel=1e-12)[0]
+    x = np.array([-1.2, 0.0, 0.7, 1.4])
+    err = np.max(np.abs(sd.marginal_x(x) / (np.exp(-c * G(x) / D) / Z) - 1))
+    print(f"elastic check: max relative error of p(x) = {err:.2e}")
+    if not err < 1e-6:
+        print("FAILED")
+        return 1
+    print("OK")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

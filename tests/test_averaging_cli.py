@@ -41,6 +41,16 @@ def test_vibro_pdf_elastic_matches_exact_density(tmp_path):
     np.testing.assert_allclose(df.p.to_numpy()[[5, 100, 300]], ex.energy_density(H), rtol=1e-6)
 
 
+def test_vibro_pdf_user_model_file(tmp_path, capsys):
+    spec = os.path.join(ROOT, "examples", "04_user_model.py") + ":HardeningSoftening"
+    out = tmp_path / "p.csv"
+    assert main(["pdf", "--model", spec, "--method", "jump", "--h-max", "5", "--points", "300",
+                 "--out", str(out)]) == 0
+    assert "hardening-softening" in capsys.readouterr().out
+    df = pd.read_csv(out)
+    assert np.trapezoid(df.p, df.H) == pytest.approx(1.0, abs=1e-3)
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--param", "delta=-1"], "delta"),
     (["--param", "zeta=1"], "unknown parameters"),
