@@ -31,7 +31,7 @@ from hybrid.errors import ModelError, RestitutionError
 
 from . import _rng
 
-TEMPLATE_VERSION = "5"
+TEMPLATE_VERSION = "6"
 _X, _Y = real_symbol("x"), real_symbol("y")
 _V = real_symbol("v")
 
@@ -109,16 +109,16 @@ class Emitter:
         """Free flight of x with the constant velocity y for time ``tau``, reflecting at the walls (loop)."""
         return _FLIGHT.format(
             tau=tau,
-            imp_r=textwrap.indent(self._impact("r", "y", record), " " * 8),
-            imp_l=textwrap.indent(self._impact("l", "-y", record), " " * 8),
+            imp_r=textwrap.indent(self._impact("r", "y", record), " " * 12),
+            imp_l=textwrap.indent(self._impact("l", "-y", record), " " * 12),
         )
 
     def flight_em(self, inc: str, record: bool) -> str:
         """Euler-Maruyama step: x moves with the old velocity, y gains ``inc`` spread linearly over the step."""
         return _FLIGHT_EM.format(
             inc=inc,
-            imp_r=textwrap.indent(self._impact("r", "_vm", record), " " * 8),
-            imp_l=textwrap.indent(self._impact("l", "-_vm", record), " " * 8),
+            imp_r=textwrap.indent(self._impact("r", "_vm", record), " " * 12),
+            imp_l=textwrap.indent(self._impact("l", "-_vm", record), " " * 12),
         )
 
     def clamp_flip(self, record: bool) -> str:
@@ -131,30 +131,37 @@ class Emitter:
 
 # Free flight with velocity y for time _tau. x <= wr and x >= wl hold before; the crossing time (wr - x)/y is on
 # the straight segment, so the position stays C^1 up to the wall. Several impacts in one step are looped over.
+# A position can only leave the gap through the impact path, so the violation counter is checked there.
 _FLIGHT = """\
 _tau = {tau}
-_it = 0
-while True:
-    _xn = x + y * _tau
-    if _xn > wr:
-        _s = (wr - x) / y
+_xn = x + y * _tau
+if _xn <= wr and _xn >= wl:
+    x = _xn
+else:
+    _it = 0
+    while True:
+        _xn = x + y * _tau
+        if _xn > wr:
+            _s = (wr - x) / y
 {imp_r}
-        y = -_e * y
-        x = wr
-        _tau = _tau - _s if _tau > _s else 0.0
-    elif _xn < wl:
-        _s = (wl - x) / y
+            y = -_e * y
+            x = wr
+            _tau = _tau - _s if _tau > _s else 0.0
+        elif _xn < wl:
+            _s = (wl - x) / y
 {imp_l}
-        y = -_e * y
-        x = wl
-        _tau = _tau - _s if _tau > _s else 0.0
-    else:
-        x = _xn
-        break
-    _it += 1
-    if _it > 64:
-        stuck += 1
-        break
+            y = -_e * y
+            x = wl
+            _tau = _tau - _s if _tau > _s else 0.0
+        else:
+            x = _xn
+            break
+        _it += 1
+        if _it > 64:
+            stuck += 1
+            break
+    if x > wr or x < wl:
+        viol += 1
 """
 
 # Euler-Maruyama with impacts: on the segment x moves with velocity u (y at the start of the step, or after the last
@@ -163,36 +170,43 @@ while True:
 _FLIGHT_EM = """\
 _inc = {inc}
 _tau = dt
-_it = 0
-while True:
-    _xn = x + y * _tau
-    if _xn > wr:
-        _s = (wr - x) / y
-        _f = _s / _tau if _tau > 0.0 else 1.0
-        _vm = y + _f * _inc
+_xn = x + y * _tau
+if _xn <= wr and _xn >= wl:
+    x = _xn
+    y = y + _inc
+else:
+    _it = 0
+    while True:
+        _xn = x + y * _tau
+        if _xn > wr:
+            _s = (wr - x) / y
+            _f = _s / _tau if _tau > 0.0 else 1.0
+            _vm = y + _f * _inc
 {imp_r}
-        y = -_e * _vm
-        _inc = _inc * (1.0 - _f)
-        x = wr
-        _tau = _tau - _s if _tau > _s else 0.0
-    elif _xn < wl:
-        _s = (wl - x) / y
-        _f = _s / _tau if _tau > 0.0 else 1.0
-        _vm = y + _f * _inc
+            y = -_e * _vm
+            _inc = _inc * (1.0 - _f)
+            x = wr
+            _tau = _tau - _s if _tau > _s else 0.0
+        elif _xn < wl:
+            _s = (wl - x) / y
+            _f = _s / _tau if _tau > 0.0 else 1.0
+            _vm = y + _f * _inc
 {imp_l}
-        y = -_e * _vm
-        _inc = _inc * (1.0 - _f)
-        x = wl
-        _tau = _tau - _s if _tau > _s else 0.0
-    else:
-        x = _xn
-        y = y + _inc
-        break
-    _it += 1
-    if _it > 64:
-        stuck += 1
-        y = y + _inc
-        break
+            y = -_e * _vm
+            _inc = _inc * (1.0 - _f)
+            x = wl
+            _tau = _tau - _s if _tau > _s else 0.0
+        else:
+            x = _xn
+            y = y + _inc
+            break
+        _it += 1
+        if _it > 64:
+            stuck += 1
+            y = y + _inc
+            break
+    if x > wr or x < wl:
+        viol += 1
 """
 
 _CLAMP = """\
@@ -276,8 +290,6 @@ def run_chunks(states, npaths, n_burn, n_samp, stride, dt, x0, y0, prm, rprm, wl
 {load}
                     xi, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)
 {step_rec}
-                    if x > wr or x < wl:
-                        viol += 1
                     xs[_l] = x
                     ys[_l] = y
 {store_b}
@@ -306,9 +318,10 @@ def run_chunks(states, npaths, n_burn, n_samp, stride, dt, x0, y0, prm, rprm, wl
                         h_over += 1
                         if H != H:
                             nonfinite += 1
-                    if do_xy:
-                        bx = (x - xlo) * x_scale
-                        by = (y - ylo) * y_scale
+                if do_xy:
+                    for _l in range(nl):
+                        bx = (xs[_l] - xlo) * x_scale
+                        by = (ys[_l] - ylo) * y_scale
                         if bx >= 0.0 and bx < nx and by >= 0.0 and by < ny:
                             xyh[k, int(by), int(bx)] += 1
                         else:
@@ -338,6 +351,7 @@ def integrate_normals(x0, y0, xis, dt, prm, rprm, wl, wr):
     sdt = math.sqrt(dt)
     hdt = 0.5 * dt
     stuck = 0
+    viol = 0
 {unpack}
 {preamble}
     for _path in range(npath):
@@ -360,6 +374,7 @@ def record_paths(state, npath, nstep, every, dt, x0, y0, prm, rprm, wl, wr, zx, 
     sdt = math.sqrt(dt)
     hdt = 0.5 * dt
     stuck = 0
+    viol = 0
     s0 = state[0]
     s1 = state[1]
     s2 = state[2]
