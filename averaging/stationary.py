@@ -216,7 +216,15 @@ class StationaryDensity:
         return self.table.G_delta
 
     def density(self, H):
-        """p(H) at arbitrary energies (0 outside [0, h_max])."""
+        """p(H) at arbitrary energies (0 outside [0, h_max]).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density(DuffingImpact(), "paper", points=101)
+        >>> float(sd.density([0.3, 5.0])[1])
+        0.0
+        """
         H = np.asarray(H, dtype=float)
         inside = (H >= 0) & (H <= self.h_max)
         out = np.zeros_like(H)

@@ -260,7 +260,14 @@ class EnergyTable:
         return Cheb(coef, series[0].a, series[0].b)
 
     def period(self, H):
-        """T(H) from the table."""
+        """T(H) from the table (interpolated; exact to about 1e-12).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> bool(EnergyTable(DuffingImpact(), 4.0).period(1.0) < 2 * np.pi)     # hardening and barriers
+        True
+        """
         return self._piecewise(H, lambda h: np.exp(self.low["logT"](h)), lambda u: np.exp(self.high["logT"](u)))
 
     def diffusion(self, H):
@@ -276,7 +283,16 @@ class EnergyTable:
         return self._piecewise(H, self.low["x2"], self.high["x2"] if self.has_impacts else None)
 
     def log_density(self, H, method: ImpactMethod | None = None, law=None):
-        """Unnormalised log p(H) of eq. 30 (with the method's loss drift, or none for ``method=None``)."""
+        """Unnormalised log p(H) of eq. 30 (with the method's loss drift, or none for ``method=None``).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact, Elastic
+        >>> tab = EnergyTable(DuffingImpact(restitution=Elastic()), 4.0)
+        >>> lp = tab.log_density(np.array([0.2, 1.0]))   # elastic: log T(H) - c H / D + const
+        >>> bool(abs((lp[1] - lp[0]) - (np.log(tab.period(1.0) / tab.period(0.2)) - 0.8 / 2)) < 1e-10)
+        True
+        """
         if not hasattr(self, "_low_logp"):
             self._low_logp = self._sum(self.phi_reg, -1.0 * self.low["lam"], self.low["logT"])
             if self.has_impacts:
