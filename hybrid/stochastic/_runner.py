@@ -365,12 +365,19 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     try:
         if scheduler in (None, "threads", "local"):
             # one chunk per call of the nogil kernel, numba.get_num_threads() calls at a time
-            with ThreadPoolExecutor(max_workers=nb.get_num_threads()) as pool:
+            pool = ThreadPoolExecutor(max_workers=nb.get_num_threads())
+            try:
                 runs = pool.map(lambda k: job.run(np.array([k], np.int64), states[[k]], kern.module), pending)
                 for result in runs:
                     accept(result)
+            finally:  # on Ctrl-C do not wait for the queued chunks (the checkpoint keeps what is done)
+                pool.shutdown(wait=False, cancel_futures=True)
         else:
             _run_dask(job, pending, states, scheduler, accept)
+    except BaseException:
+        if ckdir is not None and stats.done_chunks:  # keep every finished chunk for --resume
+            _write_checkpoint(ckdir, stats)
+        raise
     finally:
         if bar is not None:
             bar.close()
