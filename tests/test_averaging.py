@@ -369,3 +369,20 @@ def test_jump_chain_converges_at_second_order_in_the_grid():
     orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
     assert np.all(orders > 1.8), orders
     assert err[-1] < 1e-5
+
+
+def test_potential_without_closed_form_elastic_exact():
+    # sympy cannot integrate g = x + atan(x)**3: the averaging builds G numerically; elastic barriers stay exact
+    model = ImpactOscillator("x + atan(x)**3", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 1.0},
+                             restitution=Elastic())
+    assert model.potential_expr is None
+
+    def G(x):
+        return mp.quad(lambda s: s + mp.atan(s) ** 3, [0, x])
+
+    ex = ElasticStationary(lambda x: float(G(x)), 0.05, 0.05, 1.0)
+    sd = stationary_density(model, "jump", h_max=40.0, points=801)
+    Gd = float(G(1.0))
+    assert sd.barrier_energy == pytest.approx(Gd, rel=1e-14)
+    H = np.array([0.3, 2.0])
+    np.testing.assert_allclose(sd.density(H), ex.energy_density(H, G_delta=Gd), rtol=1e-6)
