@@ -233,6 +233,50 @@ def test_weak_order_splitting_with_elastic_barriers():
     assert abs(fit_slope(dts, b) - SCHEMES["splitting"].weak_order_barriers) < 0.4, b
 
 
+def _linear_recursion(scheme, dt, a, c, D):
+    """The scheme on x'' + c x' + a x = sqrt(2D) xi as z' = A z + B xi (written from the scheme's definition)."""
+    s = math.sqrt(2 * D)
+    if scheme == "em":
+        return np.array([[1, dt], [-a * dt, 1 - c * dt]]), np.array([0.0, s * math.sqrt(dt)])
+    if scheme == "milstein":  # new y first, then x with the new y
+        return (np.array([[1 - a * dt * dt, dt * (1 - c * dt)], [-a * dt, 1 - c * dt]]),
+                np.array([s * math.sqrt(dt) * dt, s * math.sqrt(dt)]))
+    h = dt / 2  # BAOAB
+    kick, drift = np.array([[1, 0], [-a * h, 1]]), np.array([[1, h], [0, 1]])
+    alpha = math.exp(-c * dt)
+    beta = s * math.sqrt((1 - alpha**2) / (2 * c))
+    A = kick @ drift @ np.diag([1, alpha]) @ drift @ kick
+    return A, kick @ drift @ np.array([0.0, beta])
+
+
+@pytest.mark.parametrize("scheme", ["em", "milstein", "splitting"])
+def test_linear_oscillator_matches_the_exact_stationary_covariance_of_the_recursion(scheme):
+    from scipy.linalg import solve_discrete_lyapunov
+
+    a, c, D, dt = 1.0, 0.5, 0.5, 0.1
+    A, B = _linear_recursion(scheme, dt, a, c, D)
+    cov = solve_discrete_lyapunov(A, np.outer(B, B))
+    model = DuffingImpact(restitution=Elastic(), a=a, b=0.0, c=c, D=D, delta=INF)
+    s = simulate_ensemble(model, scheme, dt=dt, paths=1024, t_end=1000.0, t_burn=20.0, seed=8, h_max=20.0,
+                          xy_bins=None, check_dt=False)
+    assert abs(s.mean_x2.value - cov[0, 0]) < 3 * s.mean_x2.ci
+    assert abs(s.mean_y2.value - cov[1, 1]) < 3 * s.mean_y2.ci
+
+
+def test_em_temperature_bias_of_the_known_pitfall():
+    # explicit EM at c = 0.025, dt = 1e-3 on the linear oscillator: the recursion pumps energy at the rate
+    # omega^2 dt, so c E[y^2] = D + omega^2 dt E[y^2] and E[y^2] / (D/c) - 1 ~ omega^2 dt / c = 4 % (4.17 % exactly;
+    # the issue's "~2 %" counts the rate against 2c)
+    from scipy.linalg import solve_discrete_lyapunov
+
+    A, B = _linear_recursion("em", 1e-3, 1.0, 0.025, 0.05)
+    bias = solve_discrete_lyapunov(A, np.outer(B, B))[1, 1] / (0.05 / 0.025) - 1
+    assert 0.039 < bias < 0.044
+    for scheme in ("milstein", "splitting"):
+        A, B = _linear_recursion(scheme, 1e-3, 1.0, 0.025, 0.05)
+        assert abs(solve_discrete_lyapunov(A, np.outer(B, B))[1, 1] / 2.0 - 1) < 0.002
+
+
 # ------------------------------------------------------------------------------------------------ accuracy
 def _exact_bin_probabilities(exact, edges, G_delta):
     """Exact P(H in bin) by Simpson's rule on each bin, renormalised over the histogram range."""
