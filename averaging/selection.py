@@ -65,11 +65,12 @@ Impact losses are not counted here: the jump method treats large impact losses a
 MAX_IMPACT_RATIO = 0.9
 """Refuse averaging when the 90th-percentile energy loses more than this share to impacts in one quasi-period."""
 
-# Monte Carlo error model: bias of L1(p(H)) ~ BIAS_CONSTANT[scheme] * dt**weak_order (measured in
-# ``vibro bench work-precision``); the statistical part is measured per model by a pilot run.
+# Monte Carlo error model: bias of L1(p(H)) ~ BIAS_CONSTANT[scheme] * dt**weak_order_barriers, fitted by
+# ``averaging.workprecision.fit_bias_constants`` on ``vibro bench work-precision --quick`` (elastic Duffing c = D = 0.1,
+# 512 paths; docs/charts/workprecision_mc.csv). The statistical part is measured per model by a pilot run.
 MC_SCHEMES = ("splitting", "milstein")
 """Monte Carlo schemes in order of preference (splitting needs damping linear in y and noise free of y)."""
-BIAS_CONSTANT = {"naive": 1.0, "em": 1.0, "milstein": 1.0, "splitting": 1.0}
+BIAS_CONSTANT = {"naive": 0.22, "em": 4.9, "milstein": 0.11, "splitting": 0.40}
 DEFAULT_WEAK_ORDER = {"naive": 0.5, "em": 1.0, "milstein": 1.0, "splitting": 2.0}
 L1_BINS = 40
 """Bins of the common H grid on which every L1 distance of p(H) is measured."""
@@ -104,6 +105,9 @@ class Diagnostics:
     relaxation_time : float
         1 / E_p[(damping work + impact loss) / (T H)]: how long the energy takes to forget its start (sets the
         Monte Carlo burn-in).
+    self_excited : bool
+        The damping force feeds energy in somewhere (h * y < 0, e.g. van der Pol): outside the domain where the
+        averaging error model was calibrated.
     """
 
     linear_damping: bool
@@ -119,6 +123,7 @@ class Diagnostics:
     barrier_energy: float
     notes: list = field(default_factory=list)
     relaxation_time: float = math.nan
+    self_excited: bool = False
 
 
 def _linear_damping_constant(model) -> float | None:
@@ -249,6 +254,20 @@ def _trapz(y, x):
     return float(np.trapezoid(y, x)) if hasattr(np, "trapezoid") else float(np.trapz(y, x))
 
 
+def _feeds_energy(model, h_top: float) -> bool:
+    """True when h(x, y) * y < 0 somewhere on the orbits up to energy ``h_top`` (negative damping)."""
+    from models import X, Y
+
+    h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
+    right = min(float(model.amplitude(h_top)), model.barriers[1])
+    left = max(-right, model.barriers[0])
+    x = np.linspace(left, right, 101)
+    y = np.linspace(-math.sqrt(2.0 * h_top), math.sqrt(2.0 * h_top), 101)
+    xx, yy = np.meshgrid(x, y)
+    power = np.broadcast_to(np.asarray(h(xx, yy), dtype=float), xx.shape) * yy
+    return bool(np.any(power < -1e-12 * max(1.0, float(np.max(np.abs(power))))))
+
+
 def _choose_h_max(model, elastic: bool = True) -> float:
     """An energy above which the stationary mass is negligible (< 1e-5).
 
@@ -354,6 +373,7 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     rate = (W + loss) / (T * H)
     relax = 1.0 / max(_trapz(p * rate, H), 1e-12)
     rd90 = float(W[i90] / H[i90])
+    self_excited = _feeds_energy(model, H[-1])
     ri90 = float(loss[i90] / H[i90])
     if c is None:
         notes.append("nonlinear damping: the elastic formula is not exact")
@@ -364,7 +384,7 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
         tail_impact_speed=float(tail), r_imp=float(r_imp), r_damp=float(r_damp), r_damp_p90=rd90, r_imp_p90=ri90,
         h_max=h_max,
         barrier_energy=float(model.barrier_energy) if model.has_barriers else math.inf, notes=notes,
-        relaxation_time=float(relax),
+        relaxation_time=float(relax), self_excited=bool(self_excited),
     )
 
 
@@ -462,21 +482,27 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     elastic_enough = diag.elastic_law or diag.tail_impact_speed < tol / 10.0
     preds["exact"] = predict_averaging_error("exact", diag) if elastic_enough else math.inf
     heavy = diag.r_damp_p90 > MAX_DAMPING_RATIO or diag.r_imp_p90 > MAX_IMPACT_RATIO
+    outside = diag.self_excited
     for name in ("paper", "jump"):
-        preds[name] = math.inf if heavy else predict_averaging_error(name, diag)
+        preds[name] = math.inf if (heavy or outside) else predict_averaging_error(name, diag)
     if preds["exact"] <= tol:
         why = ("impacts are elastic" if diag.elastic_law else
                f"impacts faster than V_C={diag.elastic_below:g} are rare: P(|v| > V_C) = "
                f"{diag.tail_impact_speed:.2g} < tol/10 under the elastic density")
         return Choice("exact", why + "; linear damping and additive noise make p(H) ~ T(H) exp(-beta H) exact",
                       preds["exact"], _averaging_cost(), {}, preds, diag)
-    if heavy:
+    if outside and not heavy:
+        reasons.append(
+            "averaging not trusted: the damping feeds energy in somewhere (self-excited, e.g. van der Pol), outside "
+            "the dissipative models on which the averaging error model was calibrated"
+        )
+    elif heavy:
         reasons.append(
             f"averaging refused: the 90th-percentile energy loses {diag.r_damp_p90:.2f} of H per cycle to damping "
             f"(limit {MAX_DAMPING_RATIO}) and {diag.r_imp_p90:.2f} to impacts (limit {MAX_IMPACT_RATIO}), "
             "so the system is not quasi-conservative"
         )
-    else:
+    if not (heavy or outside):
         for name in ("paper", "jump"):  # cheapest first
             if preds[name] <= tol:
                 why = (f"energy lost per cycle is small (impacts {diag.r_imp:.3f} H, damping {diag.r_damp:.3f} H "
@@ -492,7 +518,8 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
 
 
 def _averaging_cost() -> float:
-    return 0.5  # one quadrature-based density on a 2000-point grid: measured 0.1-1 s in the work-precision bench
+    # one density on a 2000-point grid: 0.01-0.03 s in the work-precision bench, plus the diagnostics already spent
+    return 0.05
 
 
 def _scheme_order(scheme: str) -> float:
@@ -751,17 +778,37 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
         from hybrid.stochastic import simulate_ensemble
 
         s = choice.settings
-        kw = dict(scheme=s["scheme"], dt=s["dt"], paths=s["paths"] // 2, t_end=s["t_end"], t_burn=s["t_burn"],
-                  h_max=h_max, bins=L1_BINS * 10, progress=progress)
-        a = simulate_ensemble(model, seed=seed, **kw)
-        b = simulate_ensemble(model, seed=seed + 7919, **kw)
-        stat = l1_between_histograms(rebin_counts(a.h_counts, L1_BINS), rebin_counts(b.h_counts, L1_BINS)) / 2.0
+        half = max(s["paths"] // 2, 1)
+        kw = dict(scheme=s["scheme"], dt=s["dt"], t_end=s["t_end"], t_burn=s["t_burn"], h_max=h_max,
+                  bins=L1_BINS * 10, xy_bins=None, progress=progress)
+        a = simulate_ensemble(model, paths=half, seed=seed, **kw)
+        b = simulate_ensemble(model, paths=half, seed=seed + 7919, **kw)
+        bias = BIAS_CONSTANT[s["scheme"]] * s["dt"] ** _scheme_order(s["scheme"])
+        extensions = 0
+        # a-posteriori check: the two independent halves measure the statistical error; extend while it misses
+        while True:
+            stat = l1_between_histograms(rebin_counts(a.h_counts, L1_BINS), rebin_counts(b.h_counts, L1_BINS)) / 2
+            spent = time.perf_counter() - t0
+            if stat + bias <= tol or extensions >= 3 or spent > max_cost:
+                break
+            factor = min((stat / max(tol - bias, tol / 3.0)) ** 2, 8.0)
+            extra = max(int(math.ceil((factor - 1.0) * a.paths)), half)
+            extensions += 1
+            a = a.merge(simulate_ensemble(model, paths=extra, seed=seed + 101 * extensions, **kw))
+            b = b.merge(simulate_ensemble(model, paths=extra, seed=seed + 7919 + 101 * extensions, **kw))
+        if extensions:
+            choice.settings["paths"] = int(a.paths + b.paths)
+            choice.settings["extensions"] = extensions
+            choice.reason += f"; extended {extensions}x after the two halves measured a larger error"
+        if stat + bias > tol:
+            warnings.warn(f"Monte Carlo measured L1 error {stat + bias:.3g} > tol={tol:g} within max_cost "
+                          f"(halves of {a.paths} paths); raise max_cost", stacklevel=2)
         stats = a.merge(b)
         centres = 0.5 * (stats.h_edges[1:] + stats.h_edges[:-1])
         masses = rebin_counts(stats.h_counts, L1_BINS)
         masses = masses / masses.sum()
         p = np.asarray(stats.h_density(), dtype=float)
-        est = stat + BIAS_CONSTANT[s["scheme"]] * s["dt"] ** _scheme_order(s["scheme"])
+        est = stat + bias
         return Solution(centres, p, edges, masses, choice, time.perf_counter() - t0, est, stats)
     from averaging import stationary_density
     from models import Elastic

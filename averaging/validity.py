@@ -249,22 +249,27 @@ def plot_mc_failures(df, path):
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     markers = {"ok": "o", "warned": "^", "refused": "x"}
-    for scheme, g in df.groupby("method"):
+    colours = {"naive": "tab:red", "em": "tab:orange", "milstein": "tab:blue", "splitting": "tab:green"}
+    styles = ["-", "--", ":", "-."]
+    deltas = sorted(df.delta.unique())
+    for (scheme, delta), g in df.groupby(["method", "delta"]):
         g = g.sort_values("crossing_ratio")
         run = g[g.verdict != "refused"]
-        (line,) = ax.loglog(run.crossing_ratio, run.l1, lw=0.8, alpha=0.6, label=scheme)
+        col = colours.get(scheme, "k")
+        ax.loglog(run.crossing_ratio, run.l1, lw=0.9, alpha=0.7, color=col, ls=styles[deltas.index(delta) % 4],
+                  label=f"{scheme}, Δ={delta:g}")
         for verdict, m in markers.items():
             sel = g[g.verdict == verdict]
             if len(sel):
                 yv = sel.l1.fillna(1.0) if verdict == "refused" else sel.l1
-                ax.scatter(sel.crossing_ratio, yv, marker=m, color=line.get_color(), s=22)
+                ax.scatter(sel.crossing_ratio, yv, marker=m, color=col, s=22)
     ax.axvline(0.1, color="orange", ls="--", lw=1, label="warn (v dt / gap = 0.1)")
     ax.axvline(0.5, color="red", ls="--", lw=1, label="refuse (0.5), x at L1=1")
     ax.set_xlabel("dt × (4 × speed scale) / gap   (dt over the barrier-crossing time)")
     ax.set_ylabel("L1 of p(H) vs exact (elastic)")
     ax.set_title("Monte Carlo: where dt fails (o ok, ^ warned, x refused)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
@@ -416,7 +421,8 @@ def solve_verification(out_dir=None, tol: float = 0.02, quick: bool = False, cas
             else:
                 mc = solve(model, tol, method="monte-carlo")
             mc_actual = float(np.abs(mc.masses - ref).sum())
-        rows.append(dict(case=label, method=sol.method, expected_l1=sol.choice.expected_error, actual_l1=actual,
+        rows.append(dict(case=label, method=sol.method, expected_l1=sol.choice.expected_error,
+                         estimated_l1=sol.estimated_error, actual_l1=actual,
                          wall_time=sol.wall_time, mc_wall_time=mc.wall_time, mc_actual_l1=mc_actual,
                          time_saved=mc.wall_time - sol.wall_time, ref_noise=ref_noise, ref_wall=ref_wall,
                          reason=sol.choice.reason))

@@ -175,3 +175,12 @@ def test_exact_two_impact_density_is_consistent_at_small_critical_speed():
     sd = stationary_density(DuffingImpact(restitution=Ma(0.1)), "exact-two-impact", h_max=4.0, points=800)
     assert 0.0 <= sd.mean_energy <= 4.0
     assert sd.prob_below_barrier > 0.3
+
+
+def test_self_excited_damping_is_outside_the_calibrated_error_model():
+    from models import DuffingVanDerPolImpact
+
+    d = diagnose(DuffingVanDerPolImpact(delta=3.0))
+    assert d.self_excited and not diagnose(DuffingImpact()).self_excited
+    ch = choose(DuffingVanDerPolImpact(delta=3.0), tol=0.02, mc_pilot=False)
+    assert ch.method == "monte-carlo" and "self-excited" in ch.reason
