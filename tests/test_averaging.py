@@ -167,10 +167,11 @@ def test_elastic_quintic_potential_exact_density():
     np.testing.assert_allclose(sd.density(H), ex.energy_density(H, G_delta=model.barrier_energy), rtol=1e-6)
 
 
-def test_linear_oscillator_without_barriers_exponential_density():
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_linear_oscillator_without_barriers_exponential_density(method):
     c, D, h_max = 0.1, 0.05, 20.0
     lin = ImpactOscillator("x", "c*y", parameters={"c": c, "D": D}, barriers=None)
-    sd = stationary_density(lin, "paper", h_max=h_max, points=500)
+    sd = stationary_density(lin, method, h_max=h_max, points=500)
     exact = linear_oscillator_energy_density(sd.H, c, D) / (1 - math.exp(-c * h_max / D))
     np.testing.assert_allclose(sd.p, exact, rtol=1e-9)
     assert sd.prob_below_barrier == 1.0 and sd.impact_rate == 0.0
