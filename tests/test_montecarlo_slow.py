@@ -17,20 +17,22 @@ from models import DuffingImpact
 pytestmark = pytest.mark.slow
 
 
-def test_dask_worker_killed_mid_run_gives_the_thread_numbers():
+def test_dask_worker_killed_mid_run_gives_the_thread_numbers(tmp_path):
     distributed = pytest.importorskip("distributed")
     model = DuffingImpact()
-    kw = dict(dt=2e-3, paths=64, t_end=600.0, t_burn=50.0, seed=12, xy_bins=(16, 16), chunk_paths=4)
+    kw = dict(dt=2e-3, paths=64, t_end=12000.0, t_burn=50.0, seed=12, xy_bins=(16, 16), chunk_paths=4)
     local = simulate_ensemble(model, "milstein", **kw)
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
     client = distributed.Client(cluster)
     try:
         pids = sorted(client.run(os.getpid).values())
         out = {}
-        runner = threading.Thread(target=lambda: out.update(s=simulate_ensemble(model, "milstein", scheduler=client,
-                                                                                **kw)))
+        runner = threading.Thread(target=lambda: out.update(s=simulate_ensemble(
+            model, "milstein", scheduler=client, checkpoint=tmp_path, checkpoint_every=1, **kw)))
         runner.start()
-        time.sleep(4.0)  # workers have loaded the kernel and finished some chunks
+        deadline = time.time() + 120
+        while not (tmp_path / "mc_checkpoint.npz").exists() and time.time() < deadline:
+            time.sleep(0.02)  # the first chunk is done: both workers are busy with the next ones
         assert runner.is_alive(), "the run ended before the kill; make it longer"
         os.kill(pids[0], signal.SIGKILL)
         runner.join(timeout=300)
@@ -39,6 +41,8 @@ def test_dask_worker_killed_mid_run_gives_the_thread_numbers():
         client.close()
         cluster.close()
     remote = out["s"]
+    with np.load(tmp_path / "mc_checkpoint.npz") as d:
+        assert len(d["chunk_ids"]) == 16
     for f in ("h_counts", "xy_counts", "v_counts", "chunk_counts", "chunk_sums", "chunk_ids"):
         assert np.array_equal(getattr(local, f), getattr(remote, f)), f
 
