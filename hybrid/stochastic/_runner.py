@@ -373,6 +373,11 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
             finally:  # on Ctrl-C do not wait for the queued chunks (the checkpoint keeps what is done)
                 pool.shutdown(wait=False, cancel_futures=True)
         else:
+            if kern.path is None:
+                raise ParameterError(
+                    "a Python-callable restitution law is compiled in memory and cannot be shipped to Dask workers; "
+                    "declare it as a sympy expression of v (CustomRestitution('...')) or use the local threads"
+                )
             _run_dask(job, pending, states, scheduler, accept)
     except BaseException:
         if ckdir is not None and stats.done_chunks:  # keep every finished chunk for --resume
