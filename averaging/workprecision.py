@@ -344,7 +344,7 @@ def plot_mc(df, path):
     axes[0].legend(fontsize=6, ncol=1)
     fig.suptitle("Monte Carlo work-precision, elastic Duffing (c=0.1, D=0.1, Δ=1); bands: 95% / noise", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    fig.savefig(path, dpi=66)
     plt.close(fig)
 
 
