@@ -235,6 +235,11 @@ class EnsembleStatistics:
     def v_edges(self) -> np.ndarray:
         return np.linspace(0.0, self.settings["v_max"], self.settings["v_bins"] + 1)
 
+    def v_density(self) -> np.ndarray:
+        """Density of the impact speeds |y-| on the bins of [0, v_max] (normalised over that range)."""
+        n = self.v_counts.sum()
+        return self.v_counts / (n * np.diff(self.v_edges)) if n else np.zeros(len(self.v_counts))
+
     # ------------------------------------------------------------------ estimates
     def _col(self, name):
         return self.chunk_counts[:, COUNTS.index(name)].astype(float)
