@@ -66,6 +66,7 @@ def _biases(scheme, dts, quantity, paths, t_end, seed):
     ("splitting", "mean_y2", [0.4, 0.28, 0.2]),
     ("milstein", "impact_rate", [0.2, 0.1, 0.05, 0.025]),
     ("em", "mean_x2", [0.1, 0.05, 0.025]),
+    ("naive", "mean_x2", [0.1, 0.05, 0.025]),
 ])
 def test_weak_orders_with_elastic_barriers_over_a_wide_step_range(scheme, quantity, dts):
     b, ci = _biases(scheme, dts, quantity, paths=4096, t_end=4000.0, seed=17)

@@ -201,7 +201,7 @@ class NaiveFlip(Scheme):
     name = "naive"
     strong_order = 0.5
     weak_order = 1.0
-    weak_order_barriers = 0.5
+    weak_order_barriers = 1.0  # measured slope 1.0 for E[x^2], but a bias ~15x that of Milstein at the same dt
     description = "baseline only: velocity flipped at the end of the step, x clamped to the wall"
 
     def step_code(self, em, record):
