@@ -41,6 +41,12 @@ def test_vibro_pdf_elastic_matches_exact_density(tmp_path):
     np.testing.assert_allclose(df.p.to_numpy()[[5, 100, 300]], ex.energy_density(H), rtol=1e-6)
 
 
+def test_vibro_pdf_prints_equations(tmp_path, capsys):
+    assert main(["pdf", "--equations", "latex", "--points", "50", "--out", str(tmp_path / "p.csv")]) == 0
+    out = capsys.readouterr().out
+    assert r"\bar{m}(H)" in out and "E[H] =" in out
+
+
 def test_vibro_pdf_user_model_file(tmp_path, capsys):
     spec = os.path.join(ROOT, "examples", "04_user_model.py") + ":HardeningSoftening"
     out = tmp_path / "p.csv"

@@ -39,6 +39,8 @@ def register(subparsers) -> None:
     p.add_argument("--joint", default=None, metavar="FILE.csv", help="also write p(x, y) (eq. 31) as x,y,p")
     p.add_argument("--joint-points", type=int, default=101, dest="joint_points",
                    help="grid points per axis of p(x, y) (default 101)")
+    p.add_argument("--equations", choices=["text", "latex"], default=None,
+                   help="also print the model's Itô and averaged equations (eqs. 16-26) as text or LaTeX")
     p.set_defaults(func=run)
 
 
@@ -92,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
     if args.joint is not None and args.joint_points < 2:
         raise ParameterError(f"--joint-points {args.joint_points} must be at least 2")
     model = model_from_args(args)
+    if args.equations is not None:
+        from averaging import averaging_equations
+
+        eq = averaging_equations(model)
+        print(eq.latex() if args.equations == "latex" else eq)
     sd = stationary_density(model, args.method, h_max=args.h_max, points=args.points)
     try:
         write_atomically(args.out, _csv({"H": sd.H, "p": sd.p}))
