@@ -93,10 +93,7 @@ def test_zeno_against_a_wall_heyoka():
     assert res.zeno_time < 50.0 and res.n_impacts >= 6
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "MISSING in hybrid.deterministic scipy backend: with a force pressing the mass into the wall (x'' = 2 - x, "
-    "wall at x = 1, e = 0.5 or 0.3), after a few impacts of shrinking speed (~5e-3) the crossing is missed, the "
-    "state leaves the gap (x reaches ~3 > delta = 1) and the run ends with status 'ok'. heyoka reports 'zeno'."))
+# regression: the scipy backend used to miss these shrinking bounces (no sign change at step ends)
 def test_zeno_against_a_wall_scipy():
     res = simulate_orbit(_push(e=0.3), x0=(0.9, 0.5), t_end=50.0, backend="scipy", dense=True)
     xs = res.trajectory.to_pandas()["x"].to_numpy()
@@ -105,25 +102,20 @@ def test_zeno_against_a_wall_scipy():
 
 @pytest.mark.parametrize("backend", ["heyoka", "scipy"])
 def test_chattering_is_reported_when_zeno_detection_is_off(backend):
-    if backend == "scipy":
-        pytest.xfail("scipy backend misses the shrinking impacts (see test_zeno_against_a_wall_scipy)")
     res = simulate_orbit(_push(), x0=(0.9, 0.5), t_end=50.0, backend=backend, zeno_window=0, min_dwell=1e-6)
     assert res.status == "chattering"
     assert "min_dwell" in res.message
 
 
-_SCIPY_GRAZING = pytest.mark.xfail(strict=True, reason=(
-    "MISSING in hybrid.deterministic scipy backend: a grazing impact (free Duffing, Newton e = 0.9, "
-    "H - G(delta) = 1e-4 or 1e-8, default rtol) is not detected: 0 impacts, status 'ok'. The guard x - delta "
-    "changes sign twice inside one step and the sign test on step ends misses it. heyoka locates it."))
-
-
-@pytest.mark.parametrize("backend", ["heyoka", pytest.param("scipy", marks=_SCIPY_GRAZING)])
+@pytest.mark.parametrize("backend", ["heyoka", "scipy"])
 @pytest.mark.parametrize("excess", [1e-4, 1e-8])
 def test_grazing_impact_is_located_with_the_right_speed(backend, excess):
     m = DuffingImpact(c=0.0, D=0.0, restitution=Newton(0.9))
     v0 = math.sqrt(2.0 * (m.barrier_energy + excess))
-    res = simulate_orbit(m, x0=(0.0, v0), t_end=3.0, backend=backend)
+    # the wall speed sqrt(2 (H - G)) carries the energy error rtol*H amplified by H / (2 excess): at excess 1e-8
+    # a 1e-3 check needs rtol ~1e-13 (heyoka's default is machine precision already)
+    rtol = 1e-13 if backend == "scipy" else None
+    res = simulate_orbit(m, x0=(0.0, v0), t_end=3.0, backend=backend, rtol=rtol)
     assert res.status == "ok"
     df = res.impacts.to_pandas()
     assert len(df) >= 1
@@ -187,10 +179,9 @@ def test_self_excited_damping_is_outside_the_calibrated_error_model():
     assert ch.method == "monte-carlo" and "self-excited" in ch.reason
 
 
-@pytest.mark.parametrize("backend", ["heyoka", pytest.param("scipy", marks=pytest.mark.xfail(strict=True, reason=(
-    "MISSING in hybrid.deterministic scipy backend: at rtol = 1e-6 (free Duffing, Newton e = 0.95, v0 = 2.2, "
-    "t_end = 60) one of the 35 impacts is skipped with status 'ok' (later impact times off by 2.9); over t_end = 200 "
-    "it skips 22-27 of 86 impacts at every rtol from 1e-4 to 1e-10 (docs/charts, README 'Which method when').")))])
+# regression: the scipy backend skipped near-grazing impacts (22-27 of 86 over t = 200) before it watched
+# the guard extremum inside each step
+@pytest.mark.parametrize("backend", ["heyoka", "scipy"])
 def test_orbit_impact_count_matches_quadrature(backend):
     from averaging.workprecision import free_quasi_period
 

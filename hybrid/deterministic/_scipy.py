@@ -5,14 +5,17 @@ refined with ``brentq`` on the step's dense output (as ``solve_ivp`` does), and 
 priority number on ties) stops the integration. After the reset a new solver starts from the post-impact state.
 A guard that *starts* at zero (just after a reset on that guard) is not a crossing, so a reset never re-fires.
 
-Limitation (shared with ``solve_ivp``): a guard that crosses zero and back within one step is not seen; pass
-``max_step`` to bound the step when orbits graze a guard, or use the heyoka backend, which finds every root of
-the step's Taylor polynomial.
+A guard that crosses zero and back within one step (a grazing impact, or the shrinking bounces of a mass pressed
+into a wall) has no sign change at the step ends. So each step also watches the guard's time derivative (its Lie
+derivative along the mode's flow, derived with sympy): when that changes sign inside the step, the guard's
+extremum is located with ``brentq`` and its value tested, and a crossing before it is refined on the dense output.
+Only a guard with two extrema inside one step could still be missed.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import sympy as sp
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 from scipy.optimize import brentq
 
@@ -60,6 +63,16 @@ class ScipyBackend(OrbitBackend):
         self._values = [self.params[p] for p in names]
         self._flows = {m.name: to_callable(m.flow, automaton.states, names) for m in automaton.modes}
         self._guards = [to_callable([t.guard], automaton.states, names) for t in automaton.transitions]
+        # d guard / dt along each mode's flow, to find a guard's extremum inside a step (grazing)
+        self._guard_rates = {
+            m.name: {
+                j: to_callable(
+                    [sum(sp.diff(t.guard, s) * f for s, f in zip(automaton.states, m.flow))], automaton.states, names
+                )
+                for j, t in enumerate(automaton.transitions) if t.source == m.name
+            }
+            for m in automaton.modes
+        }
         self._active = {
             m.name: [j for j, t in enumerate(automaton.transitions) if t.source == m.name] for m in automaton.modes
         }
@@ -85,6 +98,28 @@ class ScipyBackend(OrbitBackend):
         up = g_old < 0.0 <= g_new
         down = g_old > 0.0 >= g_new
         return up if d == 1 else down if d == -1 else (up or down)
+
+    def _crossing_at_extremum(self, j, sol, t_lo, t_hi, g_lo, g_hi):
+        """A crossing of guard ``j`` hidden inside [t_lo, t_hi] (none seen at the ends), or None.
+
+        When the guard's rate changes sign inside the step, the guard has an extremum there; each half of the step
+        is then tested for a crossing in the transition's direction, the earlier half first.
+        """
+        rate = self._guard_rates[self.mode][j]
+
+        def r(s):
+            return rate(sol(s), self._values)[0]
+
+        if not (r(t_lo) * r(t_hi) < 0.0):
+            return None
+        t_ext = brentq(r, t_lo, t_hi, xtol=4 * _EPS, rtol=4 * _EPS)
+        g_ext = self._guard(j, sol(t_ext))
+        for a, b, g_a, g_b in ((t_lo, t_ext, g_lo, g_ext), (t_ext, t_hi, g_ext, g_hi)):
+            if self._crossed(j, g_a, g_b):
+                if g_b == 0.0:
+                    return b
+                return brentq(lambda s: self._guard(j, sol(s)), a, b, xtol=4 * _EPS, rtol=4 * _EPS)
+        return None
 
     def advance(self, t_end):
         flow, values = self._flows[self.mode], self._values
@@ -131,6 +166,11 @@ class ScipyBackend(OrbitBackend):
                         t_hit = brentq(lambda s, j=j, sol=sol: self._guard(j, sol(s)), t_lo, t_new,
                                        xtol=4 * _EPS, rtol=4 * _EPS)
                     hits.append((t_hit, self._priority[j], j))
+                else:
+                    sol = sol or solver.dense_output()
+                    t_hit = self._crossing_at_extremum(j, sol, t_lo, t_new, g_old[k], g_new[k])
+                    if t_hit is not None:
+                        hits.append((t_hit, self._priority[j], j))
             if hits:
                 t_hit, _, j = min(hits)
                 y_hit = solver.y.copy() if t_hit == t_new else sol(t_hit)
