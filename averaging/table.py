@@ -141,7 +141,7 @@ class EnergyTable:
         self.has_impacts = self.h_max > self.G_delta
         if self.has_impacts:
             self._fit_high()
-        self._loss_cache: dict[str, list] = {}
+        self._loss_cache: dict[tuple, list] = {}
 
     # ------------------------------------------------------------------ fits
     def _orbits(self, H):
@@ -205,10 +205,9 @@ class EnergyTable:
     # ------------------------------------------------------------------ loss drift of a method
     def _loss_pieces(self, method: ImpactMethod, law):
         """Cumulative int 2 L / B dH over the impact range, piecewise between kinks of the loss (in u)."""
-        key = (method.name, law.spec())
+        key = (method.name, law)  # laws compare by type and parameters (custom callables by identity)
         if key in self._loss_cache:
             return self._loss_cache[key]
-        Gd = self.G_delta
         cuts = [v / np.sqrt(2.0) for v in method.speed_breakpoints(law)]
         edges = _edges(cuts, self.U)
         pieces = []
@@ -222,7 +221,6 @@ class EnergyTable:
             pieces.append((a, b, total, F))
             total += float(F(b))
         self._loss_cache[key] = pieces
-        del Gd
         return pieces
 
     def loss_integral(self, u, method, law):

@@ -387,3 +387,16 @@ def test_potential_without_closed_form_elastic_exact():
     assert sd.barrier_energy == pytest.approx(Gd, rel=1e-14)
     H = np.array([0.3, 2.0])
     np.testing.assert_allclose(sd.density(H), ex.energy_density(H, G_delta=Gd), rtol=1e-6)
+
+
+def test_custom_restitution_laws_are_kept_apart_and_kinks_found():
+    m = DuffingImpact()
+    a = stationary_density(m.with_restitution(Newton(0.9)), "paper", points=200)
+    b = stationary_density(m.with_restitution(Newton(0.5)), "paper", points=200)
+    assert a.mean_energy > b.mean_energy  # more dissipation, lower energy (a shared table must not mix laws)
+    # the Ma law written by hand as a custom Piecewise expression gives the same density (kink at v = 0.4 found)
+    from models import CustomRestitution
+
+    c = stationary_density(m.with_restitution(CustomRestitution("Piecewise((1, v <= 0.4), ((0.4/v)**(1/6), True))")),
+                           "paper", points=200)
+    np.testing.assert_allclose(c.p, stationary_density(m, "paper", points=200).p, rtol=1e-12)
