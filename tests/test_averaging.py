@@ -400,3 +400,18 @@ def test_custom_restitution_laws_are_kept_apart_and_kinks_found():
     c = stationary_density(m.with_restitution(CustomRestitution("Piecewise((1, v <= 0.4), ((0.4/v)**(1/6), True))")),
                            "paper", points=200)
     np.testing.assert_allclose(c.p, stationary_density(m, "paper", points=200).p, rtol=1e-12)
+
+
+def test_asymmetric_well_period_matches_mpmath():
+    # G = x^2/2 + 0.1 x^3 + x^4/4 (g = x + 0.3 x^2 + x^3): different turning points on each side
+    model = ImpactOscillator("x + 0.3*x**2 + x**3", parameters={"D": 0.0}, barriers=None)
+
+    def G(x):
+        return x * x / 2 + mp.mpf("0.1") * x**3 + x**4 / 4
+
+    for H in (1e-6, 0.2, 3.0):
+        with mp.workdps(40):
+            hi = mp.findroot(lambda x: G(x) - H, (mp.mpf(0), mp.mpf(4)), solver="anderson")
+            lo = mp.findroot(lambda x: G(x) - H, (mp.mpf(-4), mp.mpf(0)), solver="anderson")
+            T_ref = period_mpmath(G, H, lo, hi, dps=40)
+        assert period(model, H)[0] == pytest.approx(T_ref, rel=1e-9)
