@@ -411,7 +411,7 @@ def test_asymmetric_well_period_matches_mpmath():
 
     for H in (1e-6, 0.2, 3.0):
         with mp.workdps(40):
-            hi = mp.findroot(lambda x: G(x) - H, (mp.mpf(0), mp.mpf(4)), solver="anderson")
-            lo = mp.findroot(lambda x: G(x) - H, (mp.mpf(-4), mp.mpf(0)), solver="anderson")
+            hi = mp.findroot(lambda x, H=H: G(x) - H, (mp.mpf(0), mp.mpf(4)), solver="anderson")
+            lo = mp.findroot(lambda x, H=H: G(x) - H, (mp.mpf(-4), mp.mpf(0)), solver="anderson")
             T_ref = period_mpmath(G, H, lo, hi, dps=40)
         assert period(model, H)[0] == pytest.approx(T_ref, rel=1e-9)
