@@ -349,16 +349,27 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     t_start = time.perf_counter()
     wall0 = stats.wall_time
 
+    buffer: list = []
+
+    def flush():
+        # results are added in batches that grow with the run (add_chunks copies the per-chunk table)
+        if buffer:
+            stats.add_chunks(*(np.concatenate(parts) for parts in zip(*buffer)))
+            buffer.clear()
+
     def accept(result):
         nonlocal since
-        stats.add_chunks(*result)
+        buffer.append(result)
         stats.wall_time = wall0 + time.perf_counter() - t_start
         since += len(result[0])
         if bar is not None:
             bar.update(len(result[0]))
         if ckdir is not None and since >= checkpoint_every:
+            flush()
             _write_checkpoint(ckdir, stats)
             since = 0
+        elif len(buffer) >= max(32, stats.done_chunks // 4):
+            flush()
 
     try:
         if scheduler in (None, "threads", "local"):
@@ -377,7 +388,9 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
                     "declare it as a sympy expression of v (CustomRestitution('...')) or use the local threads"
                 )
             _run_dask(job, pending, states, scheduler, accept)
+        flush()
     except BaseException:
+        flush()
         if ckdir is not None and stats.done_chunks:  # keep every finished chunk for --resume
             _write_checkpoint(ckdir, stats)
         raise
