@@ -213,21 +213,39 @@ class OrbitNodes:
         c = 0.5 * (hi + lo)
         r = 0.5 * (hi - lo)
         left, right = geo.barriers
-        th_lo = np.where(lo < left, np.arcsin(np.clip((left - c) / r, -1, 1)), -np.pi / 2)
-        th_hi = np.where(hi > right, np.arcsin(np.clip((right - c) / r, -1, 1)), np.pi / 2)
+        # theta in [-pi/2 + gap_lo, pi/2 - gap_hi]; the gaps are nonzero where a barrier cuts the orbit. Angles are
+        # measured from the nearer end (phi) so that cos(theta) and |A - x| keep full relative precision there.
+        gap_hi = np.where(hi > right, np.arccos(np.clip((right - c) / r, -1, 1)), 0.0)
+        gap_lo = np.where(lo < left, np.arccos(np.clip((c - left) / r, -1, 1)), 0.0)
         t, w = _gauss(nodes)
-        half = 0.5 * (th_hi - th_lo)
-        theta = 0.5 * (th_hi + th_lo)[:, None] + half[:, None] * t[None, :]
-        x = c[:, None] + r[:, None] * np.sin(theta)
+        half = 0.5 * (np.pi - gap_hi - gap_lo)
+        phi_hi = gap_hi[:, None] + half[:, None] * (1.0 - t[None, :])  # pi/2 - theta
+        phi_lo = gap_lo[:, None] + half[:, None] * (1.0 + t[None, :])  # theta + pi/2
+        upper = phi_hi <= phi_lo
+        phi = np.where(upper, phi_hi, phi_lo)
+        cos_theta = np.sin(phi)
+        dist = 2.0 * r[:, None] * np.sin(0.5 * phi) ** 2  # |A - x| to the nearer turning point
+        A = np.where(upper, hi[:, None], lo[:, None])
+        x = np.where(upper, A - dist, A + dist)
         s2 = 2.0 * (H[:, None] - geo.potential(x))
-        # rounding can leave s2 <= 0 at a node next to a turning point: use the local linearisation there
-        gA = np.abs(geo.restoring(np.where(theta > 0, hi[:, None], lo[:, None])))
-        lin = 2.0 * gA * np.minimum(hi[:, None] - x, x - lo[:, None])
+        # Near a turning point H - G(x) cancels: there use G(A) - G(x) = |A - x| * |mean of g between x and A|
+        # (8-point Gauss on a short interval) plus the tiny residual H - G(A) of the root finder.
+        near = s2 < 0.5 * H[:, None]
+        if near.any():
+            rows, cols = np.nonzero(near)
+            xs, As = x[rows, cols], A[rows, cols]
+            tg, wg = _gauss(8)
+            tg, wg = 0.5 * (tg + 1.0), 0.5 * wg
+            pts = xs[:, None] + (As - xs)[:, None] * tg[None, :]
+            mean_g = np.abs(np.sum(geo.restoring(pts) * wg, axis=1))
+            s2[rows, cols] = 2.0 * ((H[rows] - geo.potential(As)) + dist[rows, cols] * mean_g)
+        # rounding can still leave s2 <= 0 at a node next to a turning point: use the local linearisation there
+        lin = 2.0 * np.abs(geo.restoring(A)) * dist
         s2 = np.where(s2 > 0, s2, np.maximum(lin, 1e-300))
         self.x = x
         self.s = np.sqrt(s2)
         # int w/s dx = int w * (r cos(theta)/s) dtheta
-        self.weights = (w[None, :] * half[:, None]) * (r[:, None] * np.cos(theta)) / self.s
+        self.weights = (w[None, :] * half[:, None]) * (r[:, None] * cos_theta) / self.s
         self.impacts = (lo < left) | (hi > right)
         self.model = model
 
