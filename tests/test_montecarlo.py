@@ -319,6 +319,26 @@ def test_elastic_barriers_match_the_exact_stationary_statistics(scheme, dt):
     assert s.violations == 0
 
 
+@pytest.mark.parametrize("scheme,dt", [("splitting", 0.05), ("milstein", 0.01)])
+def test_state_dependent_damping_and_noise_keep_the_gibbs_density(scheme, dt):
+    # h = (c + c2 x^2) y with sigma^2 = 2 (D/c)(c + c2 x^2) satisfies fluctuation-dissipation at temperature D/c,
+    # so p(x, y) ~ exp(-c H / D) exactly, as for constant damping (oracle: tests/problems.py); this exercises the
+    # x-dependent O step of the splitting and the state-dependent noise of Milstein
+    model = ImpactOscillator("a*x + b*x**3", "(c + c2*x**2)*y", noise=("sqrt(1 + c2*x**2/c)",), intensity="D",
+                             parameters={"a": 1.0, "b": 0.2, "c": 0.5, "c2": 0.5, "D": 0.5, "delta": 1.0},
+                             restitution=Elastic())
+    _, exact = elastic_duffing(delta=1.0, a=1.0, b=0.2, c=0.5, D=0.5)
+    p = SCHEMES[scheme].weak_order_barriers
+    kw = dict(paths=512, t_end=1000.0, t_burn=20.0, h_max=20.0, xy_bins=None, check_dt=False)
+    s = simulate_ensemble(model, scheme, dt=dt, seed=3, **kw)
+    coarse = simulate_ensemble(model, scheme, dt=4 * dt, seed=4, **kw)
+    for name, value in (("mean_x2", exact.mean_x2()), ("mean_y2", exact.mean_y2()),
+                        ("prob_below_barrier", exact.probability_below(model.barrier_energy))):
+        est, c = getattr(s, name), getattr(coarse, name)
+        bound = (abs(c.value - value) + 3 * c.ci) / 4**p
+        assert abs(est.value - value) < 3 * est.ci + bound, (name, est, value, bound)
+
+
 def test_em_pumps_energy_into_the_lightly_damped_oscillator():
     # the known pitfall, measured: explicit EM at c = 0.025, dt = 2e-3 raises the temperature E[y^2] = D/c by ~4 %
     model, exact = elastic_duffing(delta=INF)
