@@ -49,11 +49,6 @@ def test_mc_stiff_potential_is_refused():
         check_step(DuffingImpact(a=1e4), 0.02, 4.0)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "MISSING in hybrid.stochastic: no detection of chattering / inelastic collapse against a wall. A path pressed "
-    "into the wall with e < 1 impacts on a large share of the steps; the impact rate does not converge in dt "
-    "(26 -> 50 per unit time from dt = 0.02 to 0.0025, docs/charts/mc_chattering.csv) and is meaningless, but "
-    "simulate_ensemble returns it with no warning and no flag in the statistics."))
 def test_mc_chattering_against_a_wall_is_reported():
     m = _push(e=0.3, c=0.1, D=0.01)
     with warnings.catch_warnings(record=True) as caught:
@@ -65,11 +60,7 @@ def test_mc_chattering_against_a_wall_is_reported():
     assert flagged
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "MISSING in hybrid.stochastic: the step rule is scheme-agnostic. Explicit Euler-Maruyama at dt = 0.05 on the "
-    "elastic Duffing model (c = 0.1, D = 0.1, delta = 1) passes check_step silently (v dt / gap = 0.1, "
-    "omega dt = 0.05) but its p(H) is off by L1 = 0.27 from the exact density (energy pumping ~ dt omega^2; "
-    "Milstein and splitting at the same dt: 0.014 and 0.011). The rule should scale with the scheme's bias."))
+# regression: EM at dt = 0.05 here has L1 = 0.27 from the exact density (splitting: 0.011) and used to pass
 def test_mc_explicit_euler_bias_is_flagged():
     m = DuffingImpact(restitution=Elastic(), c=0.1, D=0.1, delta=1.0)
     with warnings.catch_warnings(record=True) as caught:

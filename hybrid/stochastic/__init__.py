@@ -33,6 +33,7 @@ Examples
 from ._codegen import Kernel, build_kernel, cache_dir, generate_source
 from ._rng import chunk_states, normals, ziggurat_tables
 from ._runner import (
+    ChatteringWarning,
     StepSizeWarning,
     check_step,
     default_chunk_paths,
@@ -45,7 +46,8 @@ from ._schemes import SCHEMES, EulerMaruyama, Milstein, NaiveFlip, Scheme, Split
 from ._statistics import EnsembleStatistics, Estimate, atomic_write_text, ratio_estimate
 
 __all__ = [
-    "SCHEMES", "EnsembleStatistics", "Estimate", "EulerMaruyama", "Kernel", "Milstein", "NaiveFlip", "Scheme",
+    "SCHEMES", "ChatteringWarning", "EnsembleStatistics", "Estimate", "EulerMaruyama", "Kernel", "Milstein",
+    "NaiveFlip", "Scheme",
     "Splitting", "StepSizeWarning", "atomic_write_text", "build_kernel", "cache_dir", "check_step", "chunk_states",
     "default_chunk_paths", "drive_paths", "generate_source", "get_scheme", "normals", "ratio_estimate",
     "sample_paths", "simulate_ensemble", "speed_scale", "ziggurat_tables",

@@ -33,6 +33,18 @@ class StepSizeWarning(UserWarning):
     """The step is legal but coarse: the result carries a visible discretisation bias."""
 
 
+class ChatteringWarning(UserWarning):
+    """Impacts happen on a sizeable share of the steps: the paths chatter against a wall at the step scale."""
+
+
+CHATTER_IMPACTS_PER_STEP = 0.05
+"""Above this many impacts per sampled path-step against inelastic walls, the impacts are not resolved by the step."""
+
+EM_TEMPERATURE_BIAS = 0.02
+"""Largest relative temperature bias omega0**2 * dt / c of explicit Euler-Maruyama accepted without a warning
+(2 %: as large as the impact effects the paper measures)."""
+
+
 # ---------------------------------------------------------------------------------------------------- step rule
 def speed_scale(model, h_max: float) -> float:
     """A typical speed: sqrt(sigma**2 / (2 k)) for constant linear damping k y and additive noise, else sqrt(2 h_max).
@@ -59,7 +71,18 @@ def speed_scale(model, h_max: float) -> float:
     return math.sqrt(2.0 * h_max)
 
 
-def check_step(model, dt: float, h_max: float = 4.0) -> dict:
+def _linear_damping(model) -> float:
+    """c_eff = -d m / d y at the equilibrium (x, y) = (0, 0): the damping rate of small oscillations."""
+    from models import X, Y
+
+    rate = -model.substitute(model.ito_drift.diff(Y)).subs({X: 0.0, Y: 0.0})
+    try:
+        return float(rate)
+    except TypeError:  # a damping law that is not differentiable at rest
+        return float("nan")
+
+
+def check_step(model, dt: float, h_max: float = 4.0, scheme=None) -> dict:
     """Apply the step-size rule; raise :class:`StepSizeError` or warn :class:`StepSizeWarning`.
 
     Rule (v = 4 * :func:`speed_scale`, gap = right - left barrier, omega**2 = max g'(x) on the gap, or on
@@ -67,7 +90,10 @@ def check_step(model, dt: float, h_max: float = 4.0) -> dict:
 
     * refuse when v * dt > gap / 2 (a fast path crosses half the gap in one step: the in-step location is then
       exact but the force and noise are frozen over a large part of an orbit) or omega * dt > 1;
-    * warn when v * dt > gap / 10 or omega * dt > 0.2 (expect a visible bias; compare with dt / 2).
+    * warn when v * dt > gap / 10 or omega * dt > 0.2 (expect a visible bias; compare with dt / 2);
+    * for explicit Euler-Maruyama (``scheme='em'``), warn when its energy pumping, a relative temperature bias of
+      about omega0**2 * dt / c (omega0**2 = g'(0), c = the damping rate at rest), exceeds
+      :data:`EM_TEMPERATURE_BIAS`.
 
     Examples
     --------
@@ -98,6 +124,21 @@ def check_step(model, dt: float, h_max: float = 4.0) -> dict:
             f"dt={dt:g} is too large for the stiffest oscillation (omega={omega:.3g}, omega*dt={omega * dt:.2f} > 1); "
             f"use dt <= {0.2 / omega:.3g}"
         )
+    scheme_name = getattr(scheme, "name", scheme)
+    if scheme_name == "em":
+        c_eff = _linear_damping(model)
+        h = 1e-6 * (hi - lo)
+        omega0_sq = float(np.diff(model.restoring(np.array([-h, h])))[0] / (2 * h))
+        omega0_sq = omega0_sq if omega0_sq > 0 else omega * omega
+        bias = omega0_sq * dt / c_eff if c_eff > 0 else float("inf")
+        info["em_temperature_bias"] = bias
+        if bias > EM_TEMPERATURE_BIAS:
+            info["ok"] = False
+            limit = f"dt <= {EM_TEMPERATURE_BIAS * c_eff / omega0_sq:.3g}" if c_eff > 0 else "a smaller dt"
+            warnings.warn(
+                f"explicit Euler-Maruyama pumps energy: relative temperature bias ~ omega0^2 dt / c = {bias:.3g} "
+                f"at dt={dt:g}; use scheme 'splitting' or 'milstein', or {limit}", StepSizeWarning, stacklevel=3,
+            )
     if v * dt > gap / 10 or omega * dt > 0.2:
         info["ok"] = False
         warnings.warn(
@@ -320,7 +361,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     settings = _settings(model, sch, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride,
                          chunk_paths, v_bins, v_max, x0)
     if check_dt:
-        settings["step_rule"] = check_step(model, dt, h_max)
+        settings["step_rule"] = check_step(model, dt, h_max, sch)
     if resume and checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
     checkpoint_every = _positive_int("checkpoint_every", checkpoint_every)
@@ -403,6 +444,17 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     bad = stats.total("nonfinite")
     if bad:
         raise ModelError(f"{bad} samples had a non-finite energy: the paths diverged; reduce dt or check the model")
+    sampled_steps = stats.paths * settings["n_samp"] * settings["stride"]
+    per_step = stats.impacts / sampled_steps if sampled_steps else 0.0
+    # inelastic collapse needs e < 1; elastic walls at a coarse dt are resolved exactly by the in-step location
+    if per_step > CHATTER_IMPACTS_PER_STEP and not model.restitution.is_elastic:
+        stats.settings["chattering"] = {"impacts_per_step": per_step, "limit": CHATTER_IMPACTS_PER_STEP}
+        warnings.warn(
+            f"chattering: {per_step:.3g} impacts per path-step (limit {CHATTER_IMPACTS_PER_STEP}); paths bounce "
+            f"against a wall on the step scale, so impact rates and wall statistics are not resolved by dt={dt:g}; "
+            "reduce dt until the impact rate stops changing, or treat the sticking phase in the model",
+            ChatteringWarning, stacklevel=2,
+        )
     return stats
 
 
