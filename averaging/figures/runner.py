@@ -1,0 +1,534 @@
+"""Compute one figure: analytic densities (``paper`` and ``jump``), Monte Carlo halves, distances, outputs.
+
+The analytic side calls :func:`averaging.stationary_density`; the Monte Carlo side calls
+:func:`hybrid.stochastic.simulate_ensemble` twice per case with independent seeds (two half-batches), merges the
+halves, and uses their difference to estimate the Monte Carlo noise.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import platform
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hybrid.errors import ParameterError
+
+from .metrics import bin_average, halves_noise_l1, joint_bin_average, l1_joint, l1_on_bins
+from .specs import FIGURES, PRESETS, Case, FigureSpec, figure_spec
+from .store import MCCache, finished, sha256_file, write_json
+
+ANALYTIC_METHODS = ("paper", "jump")
+"""Analytic methods drawn in every figure: the paper's drift-only averaging and our jump variant."""
+ANALYTIC_POINTS = 1500
+"""Energy grid points of each analytic density."""
+JOINT_GRID = 121
+"""Analytic joint density grid points per axis (CSV and contour plot)."""
+
+
+@dataclass
+class CaseResult:
+    """Everything computed for one case: analytic densities, Monte Carlo halves and merged statistics."""
+
+    case: Case
+    model: object
+    densities: dict = field(default_factory=dict)
+    mc: object = None
+    halves: tuple = ()
+    mc_seeds: tuple = ()
+    mc_wall: float = 0.0
+    mc_cached: bool = False
+    analytic_wall: float = 0.0
+    metrics: dict = field(default_factory=dict)
+
+
+@dataclass
+class FigureResult:
+    """Outcome of :func:`run_figure`: status (``finished`` or ``reused``), paths and the sidecar data."""
+
+    number: int
+    status: str
+    paths: dict
+    sidecar: dict
+    wall_time: float
+
+
+# ------------------------------------------------------------------------------------------ backends
+def _call_filtered(fn, *args, **kwargs):
+    """Call ``fn`` with only the keyword arguments its signature accepts (the engines may grow or drop options)."""
+    try:
+        params = inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return fn(*args, **kwargs)
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return fn(*args, **kwargs)
+    return fn(*args, **{k: v for k, v in kwargs.items() if k in params})
+
+
+def analytic_density(model, method: str, h_max: float, points: int = ANALYTIC_POINTS):
+    """``averaging.stationary_density(model, method, h_max, points)``."""
+    from averaging import stationary_density
+
+    return _call_filtered(stationary_density, model, method=method, h_max=h_max, points=points)
+
+
+def simulate(model, **settings):
+    """``hybrid.stochastic.simulate_ensemble(model, **settings)``."""
+    from hybrid.stochastic import simulate_ensemble
+
+    return _call_filtered(simulate_ensemble, model, **settings)
+
+
+def _value(est):
+    """A float from an Estimate (``.value``) or a plain number; NaN when missing."""
+    if est is None:
+        return float("nan")
+    v = getattr(est, "value", est)
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _ci(est):
+    return float(getattr(est, "ci", float("nan"))) if est is not None else float("nan")
+
+
+def _mc_h_density(stats):
+    d = stats.h_density()
+    return np.asarray(d[1] if isinstance(d, tuple) else d, dtype=float)
+
+
+def _mc_xy_density(stats):
+    d = stats.xy_density()
+    return np.asarray(d[-1] if isinstance(d, tuple) else d, dtype=float)
+
+
+def _mass_outside(stats) -> float:
+    """Fraction of Monte Carlo samples above h_max (NaN when the engine does not count them)."""
+    total = getattr(stats, "total", None)
+    if callable(total):
+        try:
+            n = total("samples")
+            return total("h_over") / n if n else float("nan")
+        except (ValueError, KeyError, IndexError):
+            pass
+    for name in ("h_overflow", "h_outside", "overflow", "h_above"):
+        if hasattr(stats, name):
+            over = float(np.sum(getattr(stats, name)))
+            total = float(np.sum(stats.h_counts)) + over
+            return over / total if total > 0 else float("nan")
+    return float("nan")
+
+
+def _xy_outside(stats) -> float:
+    """Fraction of samples outside the joint-histogram window (NaN when not counted)."""
+    try:
+        n = stats.total("samples")
+        return stats.total("xy_out") / n if n else float("nan")
+    except Exception:  # engine without the count
+        return float("nan")
+
+
+def xy_range(case: Case) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Joint-density window: x in [-Δ, Δ] and |y| <= sqrt(2 h_max) (H <= h_max there).
+
+    Examples
+    --------
+    >>> from averaging.figures import FIGURES
+    >>> xy_range(FIGURES[2].cases[1])[0]
+    (-1.0, 1.0)
+    """
+    d = case.delta
+    ymax = float(np.sqrt(2.0 * case.h_max))
+    return ((-d, d), (-ymax, ymax))
+
+
+def mc_settings(spec: FigureSpec, case: Case, preset: str) -> dict:
+    """Keyword arguments of ``simulate_ensemble`` for one case (for one half; paths are halved)."""
+    size = spec.size(preset)
+    half = max(1, size.paths // 2)
+    return {
+        "scheme": spec.scheme, "dt": spec.dt, "paths": half, "t_end": size.t_end, "t_burn": size.t_burn,
+        "h_max": case.h_max, "bins": spec.bins, "xy_bins": (spec.xy_bins, spec.xy_bins), "xy_range": xy_range(case),
+    }
+
+
+def case_seeds(case: Case, settings: dict) -> tuple[int, int]:
+    """Two independent seeds (one per half-batch), derived from the case and its settings only.
+
+    The same case simulated by two figures gets the same seeds, so that the cached run is shared.
+
+    Examples
+    --------
+    >>> from averaging.figures import FIGURES
+    >>> a = case_seeds(FIGURES[2].cases[0], {"dt": 0.01}); a == case_seeds(FIGURES[2].cases[0], {"dt": 0.01})
+    True
+    """
+    text = json.dumps({"case": case.describe(), "settings": settings}, sort_keys=True, default=str)
+    root = int.from_bytes(__import__("hashlib").sha256(text.encode()).digest()[:4], "little")
+    a, b = np.random.SeedSequence(root).generate_state(2)
+    return int(a), int(b)
+
+
+# ------------------------------------------------------------------------------------------ compute
+def compute_case(spec: FigureSpec, case: Case, preset: str, with_mc: bool, cache: MCCache | None,
+                 progress: bool) -> CaseResult:
+    """Analytic densities of both methods and (optionally) the two Monte Carlo halves of one case."""
+    model = case.build()
+    res = CaseResult(case=case, model=model)
+    t0 = time.perf_counter()
+    for method in ANALYTIC_METHODS:
+        res.densities[method] = analytic_density(model, method, case.h_max)
+    res.analytic_wall = time.perf_counter() - t0
+    if not with_mc:
+        return res
+    settings = mc_settings(spec, case, preset)
+    seeds = case_seeds(case, settings)
+    res.mc_seeds = seeds
+    payload = {"case": case.describe(), "settings": settings, "seeds": seeds}
+    cached = cache.get(payload) if cache is not None else None
+    t0 = time.perf_counter()
+    if cached is not None:
+        res.halves = cached
+        res.mc_cached = True
+    else:
+        res.halves = tuple(simulate(model, seed=s, progress=progress, **settings) for s in seeds)
+        if cache is not None:
+            cache.put(payload, res.halves)
+    res.mc_wall = time.perf_counter() - t0
+    a, b = res.halves
+    res.mc = _merged(a, b)
+    return res
+
+
+def _merged(a, b):
+    import copy
+
+    m = copy.deepcopy(a)
+    out = m.merge(b)
+    return out if out is not None else m
+
+
+def case_metrics(spec: FigureSpec, res: CaseResult) -> dict:
+    """Distances, peaks, moments and the Monte Carlo noise of one case (the sidecar's per-case entry)."""
+    model = res.model
+    G = model.barrier_energy
+    out: dict = {"G_delta": G, "analytic_wall_s": res.analytic_wall}
+    for method, sd in res.densities.items():
+        H, p = np.asarray(sd.H), np.asarray(sd.p)
+        k = int(np.argmax(p))
+        out[method] = {
+            "peak_p": float(p[k]), "peak_H": float(H[k]), "mean_energy": _value(getattr(sd, "mean_energy", None)),
+            "prob_below_barrier": _value(getattr(sd, "prob_below_barrier", None)),
+            "tail_p_over_peak": float(p[-1] / p[k]) if p[k] > 0 else float("nan"),
+        }
+    if res.mc is None:
+        return out
+    mc = res.mc
+    edges = np.asarray(mc.h_edges, dtype=float)
+    p_mc = _mc_h_density(mc)
+    pa, pb = (_mc_h_density(h) for h in res.halves)
+    widths = np.diff(edges)
+    span = edges[-1] - edges[0]
+    k = int(np.argmax(p_mc))
+    out["mc"] = {
+        "peak_p": float(p_mc[k]), "peak_H": float(0.5 * (edges[k] + edges[k + 1])),
+        "mean_energy": _value(mc.mean_energy), "mean_energy_ci": _ci(mc.mean_energy),
+        "prob_below_barrier": _value(getattr(mc, "prob_below_barrier", None)),
+        "impact_rate": _value(getattr(mc, "impact_rate", None)),
+        "mass_above_h_max": _mass_outside(mc),
+        "mass_outside_xy_window": _xy_outside(mc),
+        "mass_in_last_5pct_of_range": float(np.sum((p_mc * widths)[edges[1:] > edges[0] + 0.95 * span])),
+        "noise_l1_halves": halves_noise_l1(pa, pb, widths),
+        "seeds": list(res.mc_seeds), "wall_s": res.mc_wall, "cached": res.mc_cached,
+        "compile_s": float(sum(getattr(h, "compile_time", 0.0) or 0.0 for h in res.halves)),
+        "path_steps": int(sum(int(getattr(h, "path_steps", 0) or 0) for h in res.halves)),
+    }
+    l1 = {}
+    binavg = {}
+    for method, sd in res.densities.items():
+        binavg[method] = bin_average(sd.H, sd.p, edges)
+        l1[f"{method}_vs_mc"] = l1_on_bins(binavg[method], p_mc, edges)
+    if len(binavg) == 2:
+        l1["paper_vs_jump"] = l1_on_bins(binavg["paper"], binavg["jump"], edges)
+    l1["mc_noise"] = out["mc"]["noise_l1_halves"]
+    out["l1_energy"] = l1
+    if spec.kind == "joint":
+        xe, ye = (np.asarray(e, dtype=float) for e in mc.xy_edges)
+        pxy = _mc_xy_density(mc)
+        pxa, pxb = (_mc_xy_density(h) for h in res.halves)
+        area = np.outer(np.diff(ye), np.diff(xe))
+        lj = {f"{m}_vs_mc": l1_joint(joint_bin_average(sd.joint, xe, ye), pxy, xe, ye)
+              for m, sd in res.densities.items()}
+        lj["mc_noise"] = float(0.5 * np.sum(np.abs(pxa - pxb) * area))
+        out["l1_joint"] = lj
+    return out
+
+
+# ------------------------------------------------------------------------------------------ claims
+def _monotone(values, decreasing=True) -> bool:
+    d = np.diff(np.asarray(values, dtype=float))
+    return bool(np.all(d < 0) if decreasing else np.all(d > 0))
+
+
+def check_claims(spec: FigureSpec, results: list[CaseResult], metrics: list[dict]) -> list[dict]:
+    """The paper's qualitative statements for this figure, evaluated on our numbers (never tuned to agree)."""
+    n = spec.number
+    checks = []
+
+    def peaks(source):
+        return [m[source]["peak_p"] for m in metrics if source in m]
+
+    def add(statement, holds, detail):
+        checks.append({"statement": statement, "holds": holds, "detail": detail})
+
+    sources = [s for s in ("paper", "jump", "mc") if all(s in m for m in metrics)]
+    if n in (2, 14):
+        for s in sources:
+            add(f"peak of p(H) falls as Δ grows ({s})", _monotone(peaks(s)), {"peaks": peaks(s)})
+    if n in (6, 12):
+        for s in sources:
+            add(f"peak of p(H) falls as V_C grows ({s}; the paper's wording for Fig. 6)", _monotone(peaks(s)),
+                {"peaks": peaks(s)})
+        if all("mc" in m for m in metrics):
+            means = [m["mc"]["mean_energy"] for m in metrics]
+            add("mean energy grows with V_C (less dissipation; Monte Carlo)", _monotone(means, False), {"means": means})
+    if n in (10, 13):
+        for s in sources:
+            add(f"peak of p(H) falls as D grows ({s})", _monotone(peaks(s)), {"peaks": peaks(s)})
+    if n == 11:
+        for s in sources:
+            add(f"peak of p(H) rises as c grows ({s})", _monotone(peaks(s), False), {"peaks": peaks(s)})
+    if n in (15, 16):
+        m = metrics[0]
+        for s in sources:
+            complete = m[s]["peak_H"] < m["G_delta"]
+            add(f"limit cycle {'complete' if n == 15 else 'truncated'}: most likely energy "
+                f"{'below' if n == 15 else 'above'} G(Δ) ({s})", complete if n == 15 else not complete,
+                {"peak_H": m[s]["peak_H"], "G_delta": m["G_delta"]})
+        sd = results[0].densities["paper"]
+        p00 = float(np.asarray(sd.joint(np.array([0.0]), np.array([0.0]))).ravel()[0])
+        pmax = _joint_max(results[0])
+        add("crater at the origin: p(0, 0) below half the ring's maximum (paper method)", p00 < 0.5 * pmax,
+            {"p00": p00, "p_max": pmax})
+    if spec.kind == "joint" and n not in (15, 16):
+        m = metrics[0]
+        if "l1_joint" in m:
+            add("analytic joint density agrees with Monte Carlo (L1 on the Monte Carlo cells; no threshold)", None,
+                m["l1_joint"])
+    return checks
+
+
+def _joint_max(res: CaseResult) -> float:
+    (x0, x1), (y0, y1) = xy_range(res.case)
+    xs, ys = np.linspace(x0, x1, JOINT_GRID), np.linspace(y0, y1, JOINT_GRID)
+    return float(np.max(res.densities["paper"].joint(xs, ys)))
+
+
+# ------------------------------------------------------------------------------------------ outputs
+def curve_rows(spec: FigureSpec, results: list[CaseResult]):
+    """The long-format table of every plotted curve and point (the figure's CSV)."""
+    import pandas as pd
+
+    frames = []
+    for res in results:
+        label = res.case.label
+        for method, sd in res.densities.items():
+            frames.append(pd.DataFrame({"curve": f"{label} | {method}", "case": label, "method": method,
+                                        "quantity": "p(H)", "x": np.asarray(sd.H), "y": np.asarray(sd.p)}))
+        if res.mc is not None:
+            edges = np.asarray(res.mc.h_edges, dtype=float)
+            pa, pb = (_mc_h_density(h) for h in res.halves)
+            frames.append(pd.DataFrame({
+                "curve": f"{label} | mc", "case": label, "method": "mc", "quantity": "p(H)",
+                "x": 0.5 * (edges[1:] + edges[:-1]), "y": _mc_h_density(res.mc), "x_lo": edges[:-1],
+                "x_hi": edges[1:], "ci": 1.96 * 0.5 * np.abs(pa - pb),
+            }))
+        if spec.kind == "joint":
+            (x0, x1), (y0, y1) = xy_range(res.case)
+            xs, ys = np.linspace(x0, x1, JOINT_GRID), np.linspace(y0, y1, JOINT_GRID)
+            XX, YY = np.meshgrid(xs, ys)
+            for method, sd in res.densities.items():
+                frames.append(pd.DataFrame({"curve": f"{label} | {method} joint", "case": label, "method": method,
+                                            "quantity": "p(x,y)", "x": XX.ravel(), "y": YY.ravel(),
+                                            "z": np.asarray(sd.joint(xs, ys)).ravel()}))
+            if res.mc is not None:
+                xe, ye = (np.asarray(e, dtype=float) for e in res.mc.xy_edges)
+                xc, yc = 0.5 * (xe[1:] + xe[:-1]), 0.5 * (ye[1:] + ye[:-1])
+                XX, YY = np.meshgrid(xc, yc)
+                lo_x, lo_y = np.meshgrid(xe[:-1], ye[:-1])
+                hi_x, hi_y = np.meshgrid(xe[1:], ye[1:])
+                frames.append(pd.DataFrame({"curve": f"{label} | mc joint", "case": label, "method": "mc",
+                                            "quantity": "p(x,y)", "x": XX.ravel(), "y": YY.ravel(),
+                                            "z": _mc_xy_density(res.mc).ravel(), "x_lo": lo_x.ravel(),
+                                            "x_hi": hi_x.ravel(), "y_lo": lo_y.ravel(), "y_hi": hi_y.ravel()}))
+    table = pd.concat(frames, ignore_index=True)
+    cols = ["curve", "case", "method", "quantity", "x", "y", "z", "x_lo", "x_hi", "y_lo", "y_hi", "ci"]
+    for c in cols:
+        if c not in table:
+            table[c] = np.nan
+    return table[cols]
+
+
+def versions() -> dict:
+    """Versions of Python, the scientific stack and this package (and the git commit when available)."""
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("numpy", "scipy", "sympy", "numba", "matplotlib", "pandas"):
+        try:
+            out[name] = __import__(name).__version__
+        except Exception:  # a missing optional package is not an error here
+            out[name] = None
+    try:
+        from importlib.metadata import version
+
+        out["vibro-impact"] = version("vibro-impact")
+    except Exception:
+        out["vibro-impact"] = None
+    try:
+        here = Path(__file__).resolve().parent
+        out["git_commit"] = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True,
+                                           timeout=5).stdout.strip() or None
+    except Exception:
+        out["git_commit"] = None
+    return out
+
+
+def output_names(number: int) -> dict:
+    """File names of figure ``number``: PNG, CSV and the JSON sidecar.
+
+    Examples
+    --------
+    >>> output_names(2)["sidecar"]
+    'fig02.json'
+    """
+    stem = f"fig{number:02d}"
+    return {"png": f"{stem}.png", "csv": f"{stem}.csv", "sidecar": f"{stem}.json"}
+
+
+def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, force: bool = False,
+               progress: bool = False, dpi: int = 110, cache: bool = True) -> FigureResult:
+    """Compute, draw and write figure ``number`` into ``out_dir``; reuse it when already finished.
+
+    Parameters
+    ----------
+    number : int or str
+        Paper figure number, 2-16.
+    out_dir : path
+        Output directory (created).
+    preset : {'quick', 'default', 'full'}
+        Monte Carlo size.
+    with_mc : bool
+        Run Monte Carlo (False: analytic curves only, labelled so).
+    force : bool
+        Recompute even when a finished figure with the same spec hash exists.
+    progress : bool
+        Show tqdm progress bars.
+    dpi : int
+        PNG resolution.
+    cache : bool
+        Share Monte Carlo runs between figures through ``out_dir/.mc-cache``.
+
+    Returns
+    -------
+    FigureResult
+
+    Examples
+    --------
+    >>> run_figure(1, "/tmp/never")
+    Traceback (most recent call last):
+    ...
+    hybrid.errors.ParameterError: figure 1 is not reproduced: choose a number from 2 to 16, or 'all'
+    """
+    from tqdm.auto import tqdm
+
+    spec = figure_spec(number)
+    if preset not in PRESETS:
+        raise ParameterError(f"unknown size preset {preset!r}; choose one of {PRESETS}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    names = output_names(spec.number)
+    paths = {k: out_dir / v for k, v in names.items()}
+    spec_hash = spec.spec_hash(preset, {"mc": bool(with_mc), "dpi": int(dpi)})
+    if not force and finished(paths["sidecar"], spec_hash):
+        data = json.loads(paths["sidecar"].read_text(encoding="utf-8"))
+        return FigureResult(spec.number, "reused", paths, data, 0.0)
+    t_start = time.perf_counter()
+    mc_cache = MCCache(out_dir / ".mc-cache") if cache else None
+    results = []
+    bar = tqdm(spec.cases, desc=f"figure {spec.number}", unit="case", disable=not progress, leave=False)
+    for case in bar:
+        bar.set_postfix_str(case.label)
+        results.append(compute_case(spec, case, preset, with_mc, mc_cache, progress))
+    metrics = [case_metrics(spec, r) for r in results]
+    claims = check_claims(spec, results, metrics)
+    table = curve_rows(spec, results)
+
+    from .render import render_figure
+    from .store import atomic_write
+
+    caption = render_caption(spec, metrics, with_mc, preset)
+    atomic_write(paths["png"], lambda tmp: render_figure(spec, results, metrics, caption, tmp, dpi=dpi))
+    atomic_write(paths["csv"], lambda tmp: table.to_csv(tmp, index=False, float_format="%.10g"))
+    wall = time.perf_counter() - t_start
+    sidecar = {
+        "figure": spec.number, "status": "finished", "kind": spec.kind, "title": spec.title,
+        "caption": caption, "claim": spec.claim, "choices": list(spec.choices), "in_paper_mc": spec.in_paper_mc,
+        "preset": preset, "monte_carlo": bool(with_mc), "spec_hash": spec_hash,
+        "methods": {"analytic": list(ANALYTIC_METHODS), "analytic_points": ANALYTIC_POINTS,
+                    "monte_carlo": {"engine": "hybrid.stochastic.simulate_ensemble", "halves": 2,
+                                    "per_half": {k: v for k, v in mc_settings(spec, spec.cases[0], preset).items()
+                                                 if k not in ("h_max", "xy_range")}}
+                    if with_mc else None},
+        "l1_definition": "L1 = sum over Monte Carlo bins of |bin-averaged analytic p - p_mc| * bin width; "
+                         "mc_noise = L1(half A, half B) / 2 (expected L1 of the merged histogram's noise)",
+        "spec": spec.to_dict(),
+        "cases": {r.case.label: m for r, m in zip(results, metrics)},
+        "claims": claims,
+        "versions": versions(), "wall_time_s": wall,
+        "command": " ".join(["vibro", "figure", str(spec.number), f"--{preset}" if preset != "default" else ""]
+                            ).strip() + ("" if with_mc else " --no-mc"),
+        "outputs": {names["png"]: sha256_file(paths["png"]), names["csv"]: sha256_file(paths["csv"])},
+    }
+    write_json(paths["sidecar"], sidecar)  # last: marks the figure finished
+    return FigureResult(spec.number, "finished", paths, sidecar, wall)
+
+
+def render_caption(spec: FigureSpec, metrics: list[dict], with_mc: bool, preset: str) -> str:
+    """The caption under the figure: what is drawn, our choices, and the L1 distances."""
+    parts = [f"Fig. {spec.number} (reproduction, preset '{preset}'). " + spec.claim]
+    parts += list(spec.choices)
+    if spec.kind == "energy":
+        parts.append("Lines: averaging, solid = paper method (eq. 30), dashed = jump method; symbols: Monte Carlo; "
+                     "dotted verticals: H = G(Δ).")
+    if with_mc:
+        rows = []
+        for case, m in zip(spec.cases, metrics):
+            key = "l1_joint" if spec.kind == "joint" else "l1_energy"
+            l1 = m.get(key, {})
+            rows.append(f"{case.label}: paper {l1.get('paper_vs_mc', float('nan')):.3f}, jump "
+                        f"{l1.get('jump_vs_mc', float('nan')):.3f}, MC noise {l1.get('mc_noise', float('nan')):.3f}")
+        parts.append(("L1 vs Monte Carlo (joint cells) — " if spec.kind == "joint" else "L1 vs Monte Carlo — ")
+                     + "; ".join(rows) + ".")
+    else:
+        parts.append("Monte Carlo not run (analytic only).")
+    return " ".join(parts)
+
+
+def run_figures(numbers, out_dir, progress: bool = False, **kwargs) -> list[FigureResult]:
+    """Run several figures in order (``all`` = 2-16), reusing finished ones; see :func:`run_figure`."""
+    from tqdm.auto import tqdm
+
+    if numbers == "all":
+        numbers = sorted(FIGURES)
+    results = []
+    for n in tqdm(list(numbers), desc="figures", unit="fig", disable=not progress):
+        results.append(run_figure(n, out_dir, progress=progress, **kwargs))
+    return results
+
+
