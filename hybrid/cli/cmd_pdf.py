@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
-from pathlib import Path
 
 from hybrid.errors import ParameterError
+from hybrid.io import atomic_write_text
 
 
 def register(subparsers) -> None:
@@ -44,29 +42,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def write_atomically(path: str, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same directory and ``os.replace``.
-
-    Examples
-    --------
-    >>> import tempfile, os
-    >>> d = tempfile.mkdtemp()
-    >>> write_atomically(os.path.join(d, "a.csv"), "H,p\\n")
-    >>> open(os.path.join(d, "a.csv")).read()
-    'H,p\\n'
-    """
-    target = Path(path)
-    if not target.parent.is_dir():
-        raise ParameterError(f"cannot write {path!r}: directory {str(target.parent)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def _csv(columns: dict) -> str:
@@ -101,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         print(eq.latex() if args.equations == "latex" else eq)
     sd = stationary_density(model, args.method, h_max=args.h_max, points=args.points)
     try:
-        write_atomically(args.out, _csv({"H": sd.H, "p": sd.p}))
+        atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
         if args.joint is not None:
             left, right = model.barriers
             lo, hi = (float(v[0]) for v in turning_points(model, args.h_max))
@@ -110,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
             y = np.linspace(-ymax, ymax, args.joint_points)
             pxy = sd.joint(x, y)
             X, Y = np.meshgrid(x, y)
-            write_atomically(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+            atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
     except OSError as exc:
         raise ParameterError(f"cannot write output: {exc}") from exc
     Gd = sd.barrier_energy

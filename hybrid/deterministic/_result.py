@@ -2,44 +2,15 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from hybrid.io import write_csv_atomically
+
 STATUSES = ("ok", "zeno", "chattering", "max_impacts", "failed")
 """Possible values of :attr:`OrbitResult.status`."""
-
-
-def write_csv_atomically(frame, path) -> Path:
-    """Write a DataFrame to ``path`` through a temporary file in the same folder and an atomic rename.
-
-    A reader never sees a half-written file: either the old file (or none) or the complete new one.
-
-    Examples
-    --------
-    >>> import pandas as pd, tempfile, os
-    >>> with tempfile.TemporaryDirectory() as d:
-    ...     p = write_csv_atomically(pd.DataFrame({"a": [1]}), os.path.join(d, "x.csv"))
-    ...     open(p).read().splitlines()
-    ['a', '1']
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            frame.to_csv(fh, index=False)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
 
 
 @dataclass

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +17,7 @@ import numpy as np
 from scipy import stats as _st
 
 from hybrid.errors import ParameterError
+from hybrid.io import atomic_write_text  # noqa: F401  (re-exported by hybrid.stochastic)
 
 # columns of the per-chunk count table
 COUNTS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out", "v_over", "violations", "stuck",
@@ -352,18 +352,3 @@ class EnsembleStatistics:
                 f"paths={self.paths}, E[H]={self.mean_energy}, impacts={self.impacts})")
 
 
-def atomic_write_text(path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file and ``os.replace`` (readers never see half a file).
-
-    Examples
-    --------
-    >>> import tempfile, os
-    >>> p = atomic_write_text(os.path.join(tempfile.mkdtemp(), "a.txt"), "hi")
-    >>> p.read_text()
-    'hi'
-    """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-    return path
