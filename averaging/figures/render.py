@@ -72,8 +72,12 @@ def _render_energy(spec, results, metrics, caption, path, dpi):
     peak = max(float(np.max(r.densities["paper"].p)) for r in results)
     low = floor if np.isfinite(floor) else peak * 1e-5
     axes[1].set_ylim(max(low * 0.3, peak * 1e-6), peak * 2.0)
+    # the linear panel stops where every analytic curve is below 1e-3 of the highest peak (the log panel shows all)
+    visible = [float(np.max(np.asarray(sd.H)[np.asarray(sd.p) > 1e-3 * peak], initial=0.0))
+               for r in results for sd in r.densities.values()]
+    h_lin = min(h_top, 1.1 * max(visible + [max(m["G_delta"] for m in metrics)]))
     for ax in axes:
-        ax.set_xlim(0, h_top)
+        ax.set_xlim(0, h_lin if ax is axes[0] else h_top)
         ax.set_xlabel("H", fontsize=9)
         ax.set_ylabel("p(H)", fontsize=9)
         ax.tick_params(labelsize=8)

@@ -543,7 +543,7 @@ def disagreements(spec: FigureSpec, metrics: list[dict], claims: list[dict]) -> 
 def render_caption(spec: FigureSpec, metrics: list[dict], with_mc: bool, preset: str,
                    notes: list[str] | None = None) -> str:
     """The caption under the figure: what is drawn, our choices, the L1 distances and the disagreements."""
-    parts = [f"Fig. {spec.number} (reproduction, preset '{preset}'). " + spec.claim]
+    parts = [f"Fig. {spec.number} (reproduction, preset '{preset}'). The paper: " + spec.claim]
     parts += list(spec.choices)
     if spec.kind == "energy":
         parts.append("Lines: averaging, solid = paper method (eq. 30), dashed = jump method; symbols: Monte Carlo; "

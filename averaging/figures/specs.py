@@ -239,7 +239,7 @@ for _n, _case in zip((3, 4, 5), _FIG2_CASES):
     ))
 _FIGS.append(FigureSpec(
     6, "energy", "Example 1: p(H) for three critical velocities V_C", _FIG6_CASES, (_FIG6_CHOICE,),
-    "The paper: 'a larger yield velocity V_C corresponds to a smaller energy peak'. Physically a larger V_C means "
+    "'a larger yield velocity V_C corresponds to a smaller energy peak'. Physically a larger V_C means "
     "fewer plastic impacts, so less dissipation; Figs. 8 and 9 (V_C = 0.8, 2.5) are almost indistinguishable.",
     sizes=_ENERGY_SIZES,
 ))
