@@ -299,6 +299,9 @@ def check_claims(spec: FigureSpec, results: list[CaseResult], metrics: list[dict
         if all("mc" in m for m in metrics):
             means = [m["mc"]["mean_energy"] for m in metrics]
             add("mean energy grows with V_C (less dissipation; Monte Carlo)", _monotone(means, False), {"means": means})
+            if n == 6:
+                add("the paper's inference for Fig. 6: more energy is dissipated as V_C grows, i.e. the mean energy "
+                    "falls (Monte Carlo)", _monotone(means, True), {"means": means})
     if n in (10, 13):
         for s in sources:
             add(f"peak of p(H) falls as D grows ({s})", _monotone(peaks(s)), {"peaks": peaks(s)})

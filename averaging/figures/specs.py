@@ -185,7 +185,7 @@ class FigureSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 """Bumped when the output files change shape, so that older finished figures are recomputed."""
 
 
