@@ -98,7 +98,7 @@ def _render_joint(spec, results, metrics, caption, path, dpi):
     if res.mc is not None:
         xe, ye = (np.asarray(e) for e in res.mc.xy_edges)
         label = "c  Monte Carlo" + ("" if spec.in_paper_mc else " (our addition; not in the paper)")
-        panels.append((label, 0.5 * (xe[1:] + xe[:-1]), 0.5 * (ye[1:] + ye[:-1]), _mc_xy_density(res.mc)))
+        panels.append((label, xe, ye, _mc_xy_density(res.mc)))  # cell edges: drawn as the histogram's cells
     vmax = max(float(np.nanmax(p)) for *_, p in panels)
     levels = np.linspace(0.0, vmax, 16)
     fig = _figure(4.0 * len(panels) + 1.0, 5.4)
@@ -108,7 +108,13 @@ def _render_joint(spec, results, metrics, caption, path, dpi):
     cs = None
     for i, (title, px, py, p) in enumerate(panels):
         ax = fig.add_axes([0.05 + i * width, bottom, width - 0.05, 0.86 - bottom])
-        cs = ax.contourf(px, py, p, levels=levels, cmap="viridis", extend="neither")
+        if len(px) == p.shape[1] + 1 and cs is not None:
+            # histogram cells, each painted with the colour of the contour band its value falls in
+            band = np.clip(np.searchsorted(levels, p, side="right") - 1, 0, len(levels) - 2)
+            mid = 0.5 * (levels[band] + levels[band + 1])
+            ax.pcolormesh(px, py, mid, cmap=cs.cmap, norm=cs.norm, shading="flat")
+        else:
+            cs = ax.contourf(px, py, p, levels=levels, cmap="viridis", extend="neither")
         d = res.case.delta
         for xb in (-d, d):
             ax.axvline(xb, color="k", lw=2.0)
