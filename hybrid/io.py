@@ -7,7 +7,7 @@ that looks complete.
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from collections.abc import Callable
 from pathlib import Path
 
@@ -41,8 +41,10 @@ def atomic_write(path, write: Callable[[str], None]) -> Path:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise ParameterError(f"cannot write {str(path)!r}: folder {str(folder)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=folder)
-    os.close(fd)
+    # a unique hidden name created with open(.., "x"): the file gets the usual permissions (0666 minus the umask),
+    # which mkstemp's 0600 would not give
+    tmp = str(folder / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part{path.suffix}")
+    open(tmp, "x").close()
     try:
         write(tmp)
         os.replace(tmp, path)

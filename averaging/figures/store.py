@@ -9,38 +9,25 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import pickle
-import tempfile
 from pathlib import Path
+
+from hybrid.io import atomic_write as _atomic_write
 
 
 def atomic_write(path, write) -> Path:
-    """Call ``write(tmp_path)`` then rename the temporary file onto ``path`` (same directory, atomic on POSIX).
+    """:func:`hybrid.io.atomic_write`, creating the output folder first.
 
     Examples
     --------
     >>> import tempfile, pathlib
     >>> d = pathlib.Path(tempfile.mkdtemp())
-    >>> atomic_write(d / "a.txt", lambda p: pathlib.Path(p).write_text("hi")).read_text()
+    >>> atomic_write(d / "sub" / "a.txt", lambda p: pathlib.Path(p).write_text("hi")).read_text()
     'hi'
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        # mkstemp creates 0600 files; outputs get the usual permissions (0666 minus the umask)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return _atomic_write(path, write)
 
 
 def sha256_file(path) -> str:
