@@ -153,15 +153,13 @@ def _check_averagable(model) -> None:
         _ = model.barrier_energy  # raises ModelError for asymmetric barriers
 
 
-_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(64)
 
 
 def cycle_quantities(model, H):
     """Damping work per cycle W(H) = |oint h dx|, the period or quasi-period T(H), and the impact loss per cycle.
 
-    A diagnostic, computed by Gauss-Legendre quadrature in theta with x = A sin(theta), which removes the
-    inverse-square-root singularity of dx/y at the turning points (H < G(delta)); above G(delta) the orbit is cut
-    at the barriers, where y > 0. The impact loss per quasi-period is (1 - e1**2 e2**2)(H - G(delta)) with
+    A diagnostic, on the orbit nodes of :class:`averaging.quadrature.OrbitNodes` (no turning-point singularity,
+    accurate as H -> G(delta)+). The impact loss per quasi-period is (1 - e1**2 e2**2)(H - G(delta)) with
     e2 = e(e1 v) (the exact two-impact loss of NOTES.md).
 
     Parameters
@@ -184,32 +182,17 @@ def cycle_quantities(model, H):
     """
     from models import X, Y
 
+    from .quadrature import OrbitNodes
+
     H = np.atleast_1d(np.asarray(H, dtype=float))
     h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
-    A = np.asarray(model.amplitude(H), dtype=float).reshape(H.shape)
-    right = model.barriers[1]
     Gd = model.barrier_energy if model.has_barriers else np.inf
-    W = np.empty_like(H)
-    T = np.empty_like(H)
-    for i, (hi, ai) in enumerate(zip(H, A)):
-        impact = hi > Gd
-        if impact:
-            # A clipped to delta: theta covers [-pi/2, pi/2] of x = delta sin(theta); y > 0 at the barriers
-            ai = right
-        th = 0.5 * np.pi * _GL_NODES
-        x = ai * np.sin(th)
-        dx = ai * np.cos(th) * 0.5 * np.pi * _GL_WEIGHTS
-        gap = np.maximum(2.0 * hi - 2.0 * model.potential(x), 0.0)
-        y = np.sqrt(gap)
-        hp = np.broadcast_to(np.asarray(h(x, y), dtype=float), x.shape)
-        hm = np.broadcast_to(np.asarray(h(x, -y), dtype=float), x.shape)
-        W[i] = abs(float(np.sum((hp - hm) * dx)))
-        if impact:
-            T[i] = 2.0 * float(np.sum(dx / y))
-        else:
-            # dx / y = A cos(theta) dtheta / y, finite at theta = +-pi/2; evaluate the ratio without 0/0
-            safe = np.where(y > 1e-300, y, np.inf)
-            T[i] = 2.0 * float(np.sum(dx / safe))
+    orbit = OrbitNodes(model, H)  # the averaging's singularity-free nodes (int w/s dx over the level)
+    x, s = orbit.x, orbit.s
+    hp = np.broadcast_to(np.asarray(h(x, s), dtype=float), x.shape)
+    hm = np.broadcast_to(np.asarray(h(x, -s), dtype=float), x.shape)
+    W = np.abs(orbit.integral((hp - hm) * s))  # oint h dx: the y > 0 branch forwards, y < 0 backwards
+    T = orbit.integral(2.0)
     loss = np.zeros_like(H)
     if model.has_barriers:
         above = H > Gd
