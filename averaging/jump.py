@@ -7,7 +7,9 @@ q(i -> i+1) = kappa_{i+1/2} / W_i and q(i+1 -> i) = kappa_{i+1/2} / W_{i+1} (Sch
 detailed balance for pi = W, so without jumps the chain's stationary law reproduces eq. 30 exactly, and the flux
 -(sigma2_bar/2) p0 d(p/p0)/dH of the FPK equation is discretised conservatively. Impacts are jumps from node i
 (H_i > G(delta)) at rate 2/T(H_i) to the post-impact energy H' = G + e**2 (H_i - G), its mass split linearly between
-the two nodes around H' (this keeps the mean jump size).
+the two nodes around H' (this keeps the mean jump size). The top node also stands for the tail above h_max that the
+grid cuts off (its jump rates are scaled by 1 + tail mass / W_top, see :meth:`EnergyChain._tail_factor`); a plain
+reflecting top would make the far tail of p(H) flatten towards h_max.
 
 Because the only upward moves are to the next node, the stationary equation Q^T pi = 0 is equivalent to the balance
 of probability flow across each cut between nodes i and i+1; it is solved exactly by one downward sweep in O(N)
@@ -142,8 +144,28 @@ class EnergyChain:
             frm = np.concatenate([src, src])
             to = np.concatenate([j, j + 1])
             rt = np.concatenate([rate * (1.0 - theta), rate * theta])
+            rt = np.where(frm == n - 1, rt * self._tail_factor(drift_method), rt)
             keep = (to != frm) & (rt > 0)
             self.jump_from, self.jump_to, self.jump_rate = frm[keep], to[keep], rt[keep]
+
+    def _tail_factor(self, drift_method) -> float:
+        """1 + (mass above h_max) / W_top: the top node also stands for the tail it cuts off, so it jumps faster.
+
+        A reflecting top would force d(p/p0)/dH = 0 at h_max and fatten the tail near it. Above h_max the jumps
+        leave locally at rate q = 2/T, so r = p/p0 decays like exp(-lam H) with
+        (sigma2_bar/2)(lam**2 - lam (ln kappa)') = q, kappa = sigma2_bar p0 / 2 (landings from above are neglected).
+        """
+        table, grid = self.table, self.grid
+        h1, h0 = float(grid[-1]), float(grid[-2])
+        s1, s0 = table.diffusion(np.array([h1, h0]))
+        l1, l0 = table.log_density(np.array([h1, h0]), drift_method, self.law)
+        dlogp0 = (l1 - l0) / (h1 - h0)
+        a = (np.log(s1) - np.log(s0)) / (h1 - h0) + dlogp0
+        b = 2.0 * (2.0 / float(table.period(np.array([h1]))[0])) / s1
+        lam_p = 0.5 * (a + np.sqrt(a * a + 4.0 * b)) - dlogp0
+        if not (np.isfinite(lam_p) and lam_p > 0 and self.W[-1] > 0):
+            return 1.0
+        return 1.0 + np.exp(l1 - self.shift) / lam_p / self.W[-1]
 
     # ------------------------------------------------------------------ generator
     def generator(self) -> sparse.csr_matrix:

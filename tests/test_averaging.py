@@ -301,6 +301,17 @@ def test_chain_sweep_solves_the_sparse_stationary_equation():
     assert np.all(pi > 0)
 
 
+def test_jump_tail_does_not_depend_on_where_the_grid_stops():
+    # p(H) at fixed H must not feel h_max: a reflecting top made d(p/p0)/dH = 0 there and the tail 50 % too heavy
+    model = DuffingImpact()
+    H = np.array([3.0, 3.5, 3.9])
+    short = stationary_density(model, "jump", h_max=4.0, points=400)
+    long = stationary_density(model, "jump", h_max=8.0, points=800)
+    ratio_short = short.density(H) / short.density(1.0)
+    ratio_long = long.density(H) / long.density(1.0)
+    np.testing.assert_allclose(ratio_short, ratio_long, rtol=0.03)
+
+
 def test_jump_method_statistics_are_consistent():
     sd = stationary_density(DuffingImpact(), "jump", points=2000)
     assert sd.total_mass == pytest.approx(1.0, abs=1e-12)
