@@ -69,6 +69,15 @@ def test_chunk_streams_come_from_spawned_seed_sequences():
     assert np.array_equal(a[3], child)
 
 
+def test_seed_none_is_refused_not_drawn_from_os_entropy():
+    # SeedSequence(None) would give different paths on every call
+    for bad in (None, -1, 1.5, True):
+        with pytest.raises(ParameterError, match="seed"):
+            chunk_states(bad, 2)
+    with pytest.raises(ParameterError, match="seed"):
+        sample_paths(DuffingImpact(), "splitting", dt=0.01, t_end=1.0, paths=1, every=10, seed=None)
+
+
 # ------------------------------------------------------------------------------------------------ code generation
 def test_parameters_are_runtime_arguments_not_source():
     m1 = DuffingImpact(restitution=Ma(0.4))

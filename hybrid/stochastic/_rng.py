@@ -16,6 +16,8 @@ import numba as nb
 import numpy as np
 from scipy import optimize, special
 
+from hybrid.errors import ParameterError
+
 _U53 = 1.0 / 9007199254740992.0  # 2**-53
 _LAYERS = 256
 
@@ -154,6 +156,9 @@ def chunk_states(seed: int, n_chunks: int) -> np.ndarray:
     >>> chunk_states(1, 3).shape
     (3, 4)
     """
+    # SeedSequence(None) would draw OS entropy: refuse it, randomness comes only from explicit seeds
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError(f"seed={seed!r} must be a non-negative integer (randomness only from explicit seeds)")
     children = np.random.SeedSequence(seed).spawn(n_chunks)
     out = np.empty((n_chunks, 4), dtype=np.uint64)
     for k, child in enumerate(children):
