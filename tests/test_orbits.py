@@ -357,6 +357,9 @@ def test_parameter_change_does_not_recompile():
         (dict(min_dwell=-1.0), "min_dwell"),
         (dict(max_impacts=-3), "max_impacts"),
         (dict(max_impacts=0), "max_impacts"),
+        (dict(zeno_window=1), "zeno_window"),
+        (dict(zeno_window=2.5), "zeno_window"),
+        (dict(zeno_rtol=float("nan")), "zeno_rtol"),
     ],
 )
 def test_bad_input_gives_clear_errors(kwargs, match):

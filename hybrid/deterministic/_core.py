@@ -162,6 +162,12 @@ def simulate_orbit(
         raise ParameterError(f"min_dwell={min_dwell!r} must be a finite time >= 0")
     if not (isinstance(max_impacts, (int, np.integer)) and max_impacts >= 1):
         raise ParameterError(f"max_impacts={max_impacts!r} must be an integer >= 1")
+    if isinstance(zeno_window, bool) or not isinstance(zeno_window, (int, np.integer)) or \
+            not (zeno_window == 0 or zeno_window >= 2):
+        raise ParameterError(f"zeno_window={zeno_window!r} must be an integer >= 2, or 0 to switch detection off")
+    # a NaN spread limit would make every run of decreasing intervals look geometric
+    if not (isinstance(zeno_rtol, (int, float)) and math.isfinite(zeno_rtol) and zeno_rtol >= 0):
+        raise ParameterError(f"zeno_rtol={zeno_rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
     _check_inside(automaton, model, state, mode, values)
 
     if isinstance(backend, str):
