@@ -379,7 +379,8 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         stats = EnsembleStatistics.empty(settings)
     stats.settings.update({k: v for k, v in settings.items() if k not in stats.settings})
     stats.compile_time = kern.compile_time
-    pending = [k for k in range(settings["n_chunks"]) if k not in set(stats.chunk_ids.tolist())]
+    done = set(stats.chunk_ids.tolist())
+    pending = [k for k in range(settings["n_chunks"]) if k not in done]
 
     bar = None
     if progress:
@@ -544,7 +545,7 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     if not (left <= x0[0] <= right):
         raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
     if check_dt:
-        check_step(model, dt)
+        check_step(model, dt, scheme=sch)
     kern = _codegen.build_kernel(model, sch, warm=False)
     zx, zk, zf = _rng.ziggurat_tables()
     state = _rng.chunk_states(seed, 1)[0].copy()
