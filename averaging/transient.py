@@ -64,6 +64,15 @@ class TransientDensity:
         return f"TransientDensity(method={self.method!r}, H0={self.H0:g}, {len(self.times)} times)"
 
 
+def _energy_grid(top: float, points, top_name: str) -> np.ndarray:
+    """``points`` equally spaced energies on [0, top], after checking both (no silent truncation of points)."""
+    if isinstance(points, bool) or int(points) != points or points < 3:
+        raise ParameterError(f"points={points!r} must be an integer >= 3")
+    if not (np.isfinite(top) and top > 0):
+        raise ParameterError(f"{top_name}={top!r} must be a finite positive energy")
+    return np.linspace(0.0, float(top), int(points))
+
+
 def _initial_masses(grid, H0):
     if not (grid[0] <= H0 <= grid[-1]):
         raise ParameterError(f"initial energy H0={H0!r} must lie in [0, h_max={grid[-1]:g}]")
@@ -159,10 +168,10 @@ def transient_density(model, H0: float, times, method="paper", h_max: float = 4.
     """
     m = get_method(method)
     times = np.asarray(times, dtype=float)
-    if times.ndim != 1 or np.any(times < 0) or np.any(np.diff(times) < 0):
-        raise ParameterError("times must be a 1-D increasing array of values >= 0")
+    if times.ndim != 1 or not np.all(np.isfinite(times)) or np.any(times < 0) or np.any(np.diff(times) < 0):
+        raise ParameterError("times must be a 1-D increasing array of finite values >= 0")
+    grid = _energy_grid(h_max, points, "h_max")
     check_confinement(model, m, h_max, nodes)
-    grid = np.linspace(0.0, float(h_max), int(points))
     chain = EnergyChain(energy_table(model, h_max, nodes), grid, m, model.restitution)
     A = chain.generator().T.tocsr()
     pi = _initial_masses(grid, float(H0))
@@ -204,16 +213,14 @@ def mean_first_passage_time(model, H_c: float, H0=0.0, method="paper", points: i
     True
     """
     m = get_method(method)
-    if not (np.isfinite(H_c) and H_c > 0):
-        raise ParameterError(f"H_c={H_c!r} must be a positive energy")
-    grid = np.linspace(0.0, float(H_c), int(points))
+    grid = _energy_grid(H_c, points, "H_c")
+    H0a = np.asarray(H0, dtype=float)
+    if not np.all((H0a >= 0) & (H0a <= H_c)):  # also refuses NaN
+        raise ParameterError(f"starting energies must lie in [0, H_c={H_c:g}]")
     chain = EnergyChain(energy_table(model, H_c, nodes), grid, m, model.restitution)
     Q = chain.generator().tocsc()
     n = len(grid) - 1  # the last node is absorbing
     tau = np.zeros(len(grid))
     tau[:n] = splu(-Q[:n, :n].tocsc()).solve(np.ones(n))
-    H0a = np.asarray(H0, dtype=float)
-    if np.any(H0a < 0) or np.any(H0a > H_c):
-        raise ParameterError(f"starting energies must lie in [0, H_c={H_c:g}]")
     out = np.interp(H0a, grid, tau)
     return float(out) if out.ndim == 0 else out

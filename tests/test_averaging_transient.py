@@ -66,6 +66,21 @@ def test_transient_bad_input():
         transient_density(_linear(), 1.0, [0.0, 1.0], h_max=30.0, scheme="rk4")
     with pytest.raises(ParameterError, match="increasing"):
         transient_density(_linear(), 1.0, [1.0, 0.0], h_max=30.0)
+    with pytest.raises(ParameterError, match="finite"):
+        transient_density(_linear(), 1.0, [0.0, math.nan], h_max=30.0)
+    with pytest.raises(ParameterError, match="points"):
+        transient_density(_linear(), 1.0, [0.0, 1.0], h_max=30.0, points=2)
+
+
+def test_mfpt_bad_input_is_refused_not_truncated_or_nan():
+    with pytest.raises(ParameterError, match="points"):
+        mean_first_passage_time(_linear(), 1.0, points=2.5)
+    with pytest.raises(ParameterError, match="points"):
+        mean_first_passage_time(_linear(), 1.0, points=1)
+    with pytest.raises(ParameterError, match="starting energies"):
+        mean_first_passage_time(_linear(), 1.0, H0=math.nan, points=50)
+    with pytest.raises(ParameterError, match="H_c"):
+        mean_first_passage_time(_linear(), math.inf, points=50)
 
 
 def test_mfpt_with_impacts_matches_the_quadrature_formula_on_direct_coefficients():
