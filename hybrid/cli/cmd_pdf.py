@@ -42,8 +42,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-
-
 def _csv(columns: dict) -> str:
     import numpy as np
 

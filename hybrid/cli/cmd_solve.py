@@ -56,11 +56,8 @@ def run(args) -> int:
     preds = ", ".join(f"{k} {v:.3g}" for k, v in sol.choice.predictions.items())
     print(f"predicted L1 of the candidates: {preds}")
     if args.out:
-        from pathlib import Path
+        from hybrid.io import write_csv_atomically
 
-        path = Path(args.out)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        sol.to_pandas().to_csv(tmp, index=False)
-        tmp.replace(path)
+        path = write_csv_atomically(sol.to_pandas(), args.out)
         print(f"wrote {path}")
     return 0
