@@ -388,6 +388,9 @@ def test_merge_adds_exactly_and_refuses_double_counting():
     with pytest.raises(ParameterError, match="counted twice"):
         a.add_chunks(a.chunk_ids[:1], a.chunk_paths[:1], a.h_counts[None], None, a.v_counts[None],
                      a.chunk_counts[:1], a.chunk_sums[:1])
+    other = simulate_ensemble(DuffingImpact(delta=0.8), "splitting", seed=2, **kw)
+    with pytest.raises(ParameterError, match="different model"):
+        a.merge(other)
 
 
 def test_checkpoint_roundtrip_and_resume_in_process(tmp_path):

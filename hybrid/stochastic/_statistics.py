@@ -142,7 +142,7 @@ class EnsembleStatistics:
         self.chunk_counts, self.chunk_sums = self.chunk_counts[order], self.chunk_sums[order]
 
     def merge(self, other: EnsembleStatistics) -> EnsembleStatistics:
-        """A new object with both ensembles (same histogram edges and step; disjoint chunks or another seed).
+        """A new object with both ensembles (same model, histogram edges and step; disjoint chunks or another seed).
 
         Examples
         --------
@@ -151,7 +151,8 @@ class EnsembleStatistics:
         >>> a.merge(a).done_chunks
         0
         """
-        for key in ("h_max", "bins", "xy_bins", "xy_range", "v_max", "v_bins", "t_sample", "dt", "scheme", "stride"):
+        for key in ("model", "h_max", "bins", "xy_bins", "xy_range", "v_max", "v_bins", "t_sample", "dt", "scheme",
+                    "stride"):
             if self.settings.get(key) != other.settings.get(key):
                 raise ParameterError(
                     f"cannot merge ensembles with different {key}: {self.settings.get(key)!r} vs "
