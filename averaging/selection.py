@@ -427,6 +427,13 @@ def predict_averaging_error(method: str, diag: Diagnostics) -> float:
     return m["floor"] + m["slope"] * diag.r_imp + m["slope_damp"] * damp
 
 
+def _check_request(tol, max_cost) -> None:
+    if not (0.0 < tol < 2.0):
+        raise ParameterError(f"tol={tol!r}: an L1 distance between densities lies in (0, 2); use e.g. tol=0.02")
+    if not max_cost > 0:
+        raise ParameterError(f"max_cost={max_cost!r} must be a positive wall time in seconds, e.g. max_cost=600")
+
+
 def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Diagnostics | None = None,
            mc_pilot: bool = True, seed: int = 1) -> Choice:
     """Pick the cheapest method predicted to reach ``tol`` in the L1 distance of p(H).
@@ -454,8 +461,7 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     >>> choose(DuffingImpact(restitution=Elastic())).method
     'exact'
     """
-    if not (0.0 < tol < 2.0):
-        raise ParameterError(f"tol={tol!r}: an L1 distance between densities lies in (0, 2); use e.g. tol=0.02")
+    _check_request(tol, max_cost)
     try:
         diag = diagnostics if diagnostics is not None else diagnose(model)
     except ModelError as exc:
@@ -733,6 +739,7 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
     >>> sol.method                                                     # doctest: +SKIP
     'exact'
     """
+    _check_request(tol, max_cost)  # also for method='monte-carlo', which does not go through choose
     t0 = time.perf_counter()
     forced = method != "auto"
     if method not in ("auto", "exact", "paper", "jump", "monte-carlo"):

@@ -128,6 +128,13 @@ def test_bad_tolerance_is_refused():
         choose(DuffingImpact(), tol=0.0)
     with pytest.raises(ParameterError, match="method"):
         solve(DuffingImpact(), method="magic")
+    with pytest.raises(ParameterError, match="max_cost"):
+        choose(DuffingImpact(), tol=0.05, max_cost=-1.0, mc_pilot=False)
+    # forced Monte Carlo skips choose(); its request is checked before anything runs
+    with pytest.raises(ParameterError, match="tol"):
+        solve(DuffingImpact(), tol=math.nan, method="monte-carlo")
+    with pytest.raises(ParameterError, match="max_cost"):
+        solve(DuffingImpact(), tol=0.05, method="monte-carlo", max_cost=0.0)
 
 
 def test_error_model_is_monotone_in_impact_losses():
