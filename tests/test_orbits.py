@@ -353,6 +353,7 @@ def test_parameter_change_does_not_recompile():
         (dict(t_end=-1.0), "before t0"),
         (dict(backend="euler"), "unknown backend"),
         (dict(rtol=2.0), "rtol"),
+        (dict(atol=1e-12), "atol"),
         (dict(backend="scipy", method="RK99"), "unknown scipy method"),
         (dict(min_dwell=-1.0), "min_dwell"),
         (dict(max_impacts=-3), "max_impacts"),

@@ -114,8 +114,8 @@ def simulate_orbit(
     params : dict, optional
         Parameter overrides (for a model, as in ``model.with_params``).
     rtol, atol : float, optional
-        Tolerances. heyoka: ``rtol`` is the Taylor tolerance (default machine epsilon). scipy: defaults 1e-10 and
-        rtol/100.
+        Tolerances. heyoka: ``rtol`` is the Taylor tolerance (default machine epsilon; ``atol`` is refused).
+        scipy: defaults 1e-10 and rtol/100.
     dense : bool
         Keep the state after every step (``result.trajectory``).
     min_dwell : float

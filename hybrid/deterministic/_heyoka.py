@@ -129,6 +129,9 @@ class HeyokaBackend(OrbitBackend):
             raise ParameterError(f"heyoka backend: unknown options {sorted(options)}")
         if rtol is not None and not (0 < rtol < 1):
             raise ParameterError(f"heyoka tolerance rtol={rtol!r} must lie in (0, 1), e.g. 1e-15")
+        if atol is not None:  # it used to be ignored silently
+            raise ParameterError(f"heyoka has one tolerance, rtol; atol={atol!r} is not used: drop it or use "
+                                 "backend='scipy'")
         super().__init__(automaton, params, rtol=rtol, atol=atol, dense=dense)
         try:
             self.ta, self.compile_time = compiled_integrator(automaton, rtol)
