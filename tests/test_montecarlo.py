@@ -118,6 +118,23 @@ def test_custom_restitution_expression_and_callable():
         generate_source(DuffingImpact(restitution=bad), SCHEMES["milstein"])
 
 
+def test_two_callable_laws_get_their_own_kernels():
+    # the generated source is the same for every callable law; the kernel must still use the right one
+    def half(v):
+        return 0.5
+
+    def most(v):
+        return 0.9
+
+    z = np.zeros((1, 150))
+    ends = [drive_paths(DuffingImpact(D=0.0, c=0.0, restitution=CustomRestitution(law)), "splitting", 0.01, z,
+                        x0=(0.0, 2.0)) for law in (half, most)]
+    # energy after the impacts: H+ = G(delta) + e^2 (H- - G(delta)) for each impact, so the larger e keeps more
+    m = DuffingImpact(D=0.0, c=0.0)
+    h_half, h_most = (float(m.energy(*end[0])) for end in ends)
+    assert h_most > h_half
+
+
 def test_splitting_refuses_nonlinear_damping_and_unknown_scheme():
     with pytest.raises(ModelError, match="linear in y"):
         generate_source(RayleighImpact(), SCHEMES["splitting"])

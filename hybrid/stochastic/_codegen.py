@@ -505,6 +505,7 @@ def generate_source(model, scheme, cache: bool = True) -> tuple[str, tuple[float
 
 
 _LOADED: dict[str, types.ModuleType] = {}
+_USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused
 _RNG_HASH = hashlib.sha256(inspect.getsource(_rng).encode()).hexdigest()[:8]
 
 
@@ -561,6 +562,11 @@ def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel
     t0 = time.perf_counter()
     src, law_values, user_law = generate_source(model, scheme, cache)
     name = _module_name(model, scheme, src)
+    if user_law is not None:
+        # the source only calls _user_law(_v): the in-memory module belongs to this very callable
+        fn = model.restitution.callable
+        _USER_LAWS.setdefault(id(fn), fn)
+        name += f"_law{id(fn):x}"
     module, path = load_source(name, src, user_law)
     kern = Kernel(module, path, tuple(model.params), law_values, scheme.name, src)
     if warm:
