@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hybrid.io import atomic_write, atomic_write_text, write_csv_atomically
+
 from .selection import (
     L1_BINS,
     MAX_DAMPING_RATIO,
@@ -155,7 +157,7 @@ def plot_averaging_map(df, path, x: str, y: str, title: str = ""):
     axes[0].set_ylabel(y)
     fig.colorbar(im, ax=list(axes), shrink=0.8, label="L1 of p(H) vs MC")
     fig.suptitle(title + "  (red hatch: not quasi-conservative, averaging refused)", fontsize=9)
-    fig.savefig(path, dpi=75, bbox_inches="tight")
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=75, bbox_inches="tight"))
     plt.close(fig)
 
 
@@ -272,7 +274,7 @@ def plot_mc_failures(df, path):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80))
     plt.close(fig)
 
 
@@ -358,29 +360,29 @@ def validity_maps(out_dir, quick: bool = False, parts=("averaging", "mc", "orbit
         for name in _grids(quick):
             progress(f"[validity] averaging {name}")
             df = averaging_map(name, quick=quick, progress=progress)
-            df.to_csv(out / f"averaging_{name}.csv", index=False)
+            write_csv_atomically(df, out / f"averaging_{name}.csv")
             plot_averaging_map(df, out / f"averaging_{name}.png", df.attrs["x"], df.attrs["y"], titles[name])
             results[f"averaging_{name}"] = df
         fit = fit_error_model([results[k] for k in results if k.startswith("averaging_")])
         progress(f"[validity] fitted error model: {fit}")
         import json
 
-        (out / "error_model.json").write_text(json.dumps(fit, indent=2))
+        atomic_write_text(out / "error_model.json", json.dumps(fit, indent=2))
         results["error_model"] = fit
     if "mc" in parts:
         progress("[validity] Monte Carlo failures")
         df = mc_failure_map(quick=quick, progress=progress)
-        df.to_csv(out / "mc_failures.csv", index=False)
+        write_csv_atomically(df, out / "mc_failures.csv")
         plot_mc_failures(df, out / "mc_failures.png")
         progress(f"  stiff potential a=1e4, dt=0.01: {df.attrs['stiff']}")
         results["mc_failures"] = df
         ch = mc_chattering(progress=progress)
-        ch.to_csv(out / "mc_chattering.csv", index=False)
+        write_csv_atomically(ch, out / "mc_chattering.csv")
         results["mc_chattering"] = ch
     if "orbits" in parts:
         progress("[validity] orbit failures")
         df = orbit_failures(progress=progress)
-        df.to_csv(out / "orbit_failures.csv", index=False)
+        write_csv_atomically(df, out / "orbit_failures.csv")
         results["orbit_failures"] = df
     return results
 
@@ -463,7 +465,7 @@ def solve_verification(out_dir=None, tol: float = 0.02, quick: bool = False, cas
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        df.to_csv(out / "solve_verification.csv", index=False)
+        write_csv_atomically(df, out / "solve_verification.csv")
     return df
 
 

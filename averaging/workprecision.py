@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 from scipy import integrate
 
+from hybrid.io import atomic_write, write_csv_atomically
+
 from .selection import L1_BINS, bin_masses, l1_between_histograms, rebin_counts
 
 MC_LABELS = {"naive": "naive flip", "em": "Euler-Maruyama (located)", "milstein": "Milstein (located)",
@@ -344,7 +346,7 @@ def plot_mc(df, path):
     axes[0].legend(fontsize=6, ncol=1)
     fig.suptitle("Monte Carlo work-precision, elastic Duffing (c=0.1, D=0.1, Δ=1); bands: 95% / noise", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=66)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=66))
     plt.close(fig)
 
 
@@ -367,7 +369,7 @@ def plot_averaging(df, path):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80))
     plt.close(fig)
 
 
@@ -394,7 +396,7 @@ def plot_deterministic(df, path):
         ax.legend(fontsize=8)
     fig.suptitle("Orbit backends across tolerances (free Duffing, Newton e=0.95)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80))
     plt.close(fig)
 
 
@@ -428,7 +430,7 @@ def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "dete
         run, plot = runners[part]
         progress(f"[work-precision] {part}")
         df = run(quick=quick, progress=progress)
-        df.to_csv(out / f"workprecision_{part}.csv", index=False)
+        write_csv_atomically(df, out / f"workprecision_{part}.csv")
         plot(df, out / f"workprecision_{part}.png")
         results[part] = df
     return results
