@@ -355,6 +355,8 @@ def test_parameter_change_does_not_recompile():
         (dict(rtol=2.0), "rtol"),
         (dict(atol=1e-12), "atol"),
         (dict(backend="scipy", method="RK99"), "unknown scipy method"),
+        (dict(backend="scipy", max_step=float("nan")), "max_step"),
+        (dict(backend="scipy", max_step=0.0), "max_step"),
         (dict(min_dwell=-1.0), "min_dwell"),
         (dict(max_impacts=-3), "max_impacts"),
         (dict(max_impacts=0), "max_impacts"),

@@ -52,6 +52,12 @@ class ScipyBackend(OrbitBackend):
         atol = rtol * 1e-2 if atol is None else float(atol)
         if not (0 < rtol < 1) or not (atol > 0):
             raise ParameterError(f"scipy tolerances must satisfy 0 < rtol < 1 and atol > 0, got {rtol!r}, {atol!r}")
+        try:
+            max_step = float(max_step)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"scipy max_step={max_step!r} is not a number") from exc
+        if not max_step > 0:  # NaN would pass scipy's own check and mean 'no limit'
+            raise ParameterError(f"scipy max_step={max_step!r} must be > 0 (inf for no limit)")
         if isinstance(method, str):
             if method not in METHODS:
                 raise ParameterError(f"unknown scipy method {method!r}; use one of {sorted(METHODS)}")
