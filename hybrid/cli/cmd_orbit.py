@@ -115,7 +115,7 @@ def comparison_tables(model, df, rows: int = 6) -> tuple[str, dict]:
 def run(args: argparse.Namespace) -> int:
     """Run ``vibro orbit``; return 0 on success, 1 when the orbit stopped early (Zeno, chattering, failure)."""
     from hybrid.deterministic import quasi_period, simulate_orbit
-    from hybrid.deterministic._result import write_csv_atomically
+    from hybrid.io import write_csv_atomically
 
     from .common import model_from_args
 
