@@ -171,7 +171,9 @@ class FigureSpec:
         return d
 
     def spec_hash(self, preset: str, extra: dict | None = None) -> str:
-        """Hash of everything that determines the outputs for ``preset`` (reuse key of finished figures).
+        """Hash of the spec, ``preset``, ``extra`` and :data:`FORMAT_VERSION` (reuse key of finished figures).
+
+        Code changes are not hashed: bump :data:`FORMAT_VERSION` when they change the outputs.
 
         Examples
         --------
@@ -185,8 +187,9 @@ class FigureSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-FORMAT_VERSION = 3
-"""Bumped when the output files change shape, so that older finished figures are recomputed."""
+FORMAT_VERSION = 4
+"""Bumped when the outputs change (file shape, or the numbers of the analytic curves), so that older finished
+figures are recomputed; Monte Carlo runs stay reused from their own cache. 4: the jump method's tail near h_max."""
 
 
 def _sizes(default_paths: int, default_t: float, burn: float, quick_t: float = 60.0, full_factor: int = 8):
