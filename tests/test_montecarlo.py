@@ -78,6 +78,14 @@ def test_seed_none_is_refused_not_drawn_from_os_entropy():
         sample_paths(DuffingImpact(), "splitting", dt=0.01, t_end=1.0, paths=1, every=10, seed=None)
 
 
+def test_nonfinite_or_wrong_length_x0_is_refused_before_running():
+    for bad in ((0.0, float("nan")), (0.0, float("inf")), (0.0, 1.0, 2.0)):
+        with pytest.raises(ParameterError, match="x0"):
+            simulate_ensemble(DuffingImpact(), "splitting", dt=0.01, paths=2, t_end=2.0, t_burn=1.0, x0=bad)
+        with pytest.raises(ParameterError, match="x0"):
+            sample_paths(DuffingImpact(), "splitting", dt=0.01, t_end=1.0, paths=1, every=10, x0=bad)
+
+
 # ------------------------------------------------------------------------------------------------ code generation
 def test_parameters_are_runtime_arguments_not_source():
     m1 = DuffingImpact(restitution=Ma(0.4))

@@ -159,6 +159,14 @@ def _positive_int(name, value):
     return iv
 
 
+def _check_x0(model, x0) -> None:
+    if len(x0) != 2 or not all(math.isfinite(v) for v in x0):
+        raise ParameterError(f"x0={x0!r} must be two finite numbers (position, velocity)")
+    left, right = model.barriers
+    if not (left <= x0[0] <= right):
+        raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
+
+
 def default_chunk_paths(paths: int) -> int:
     """Paths per chunk: 8 (the kernel interleaves 8 lanes), fewer when that would leave fewer than 8 chunks.
 
@@ -191,9 +199,8 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
     n_samp = (n_total - n_burn) // stride
     if n_samp < 1:
         raise ParameterError(f"t_end - t_burn = {t_end - t_burn:g} holds no sample at dt={dt:g}, stride={stride}")
+    _check_x0(model, x0)
     left, right = model.barriers
-    if not (left <= x0[0] <= right):
-        raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
     if xy_bins is not None:
         nx, ny = (_positive_int("xy_bins", b) for b in xy_bins)
         xy_bins = [nx, ny]
@@ -541,9 +548,9 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
         raise ParameterError(f"t_end={t_end:g} holds fewer than every={every} steps of dt={dt:g}")
     if paths * (nstep // every + 1) * 2 > 10**7:
         raise ParameterError("too many stored values (> 1e7); raise every or lower paths / t_end")
+    x0 = tuple(float(v) for v in x0)
+    _check_x0(model, x0)
     left, right = model.barriers
-    if not (left <= x0[0] <= right):
-        raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
     if check_dt:
         check_step(model, dt, scheme=sch)
     kern = _codegen.build_kernel(model, sch, warm=False)
