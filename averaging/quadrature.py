@@ -206,7 +206,7 @@ class OrbitNodes:
             raise ParameterError("energies H must be a 1-D array")
         if not np.all(np.isfinite(H)) or np.any(H <= 0):
             bad = H[~(np.isfinite(H) & (H > 0))][0]
-            raise ParameterError(f"orbit integrals need finite energies H > 0, got H={bad!r}")
+            raise ParameterError(f"orbit integrals need finite energies H > 0, got H={float(bad)!r}")
         self.H = H
         geo = geometry(model)
         lo, hi = turning_points(model, H)
