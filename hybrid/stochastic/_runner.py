@@ -21,6 +21,7 @@ import numba as nb
 import numpy as np
 
 from hybrid.errors import ModelError, ParameterError, StepSizeError
+from hybrid.io import atomic_write
 
 from . import _codegen, _rng
 from ._schemes import get_scheme
@@ -289,9 +290,9 @@ def _remote_run(job: _Job, ids, states):
 # ---------------------------------------------------------------------------------------------------- checkpoints
 def _write_checkpoint(directory: Path, stats: EnsembleStatistics) -> None:
     directory.mkdir(parents=True, exist_ok=True)
-    tmp = directory / f".{CHECKPOINT_FILE}.tmp{os.getpid()}.npz"
-    np.savez(tmp, **stats.to_arrays())
-    os.replace(tmp, directory / CHECKPOINT_FILE)
+    arrays = stats.to_arrays()
+    # the shared writer: a unique temporary name (ends in .npz, so savez adds nothing), removed on failure
+    atomic_write(directory / CHECKPOINT_FILE, lambda tmp: np.savez(tmp, **arrays))
 
 
 _RESUME_KEYS = ("scheme", "dt", "paths", "t_end", "t_burn", "seed", "h_max", "bins", "xy_bins", "xy_range", "stride",
