@@ -181,11 +181,12 @@ def default_chunk_paths(paths: int) -> int:
 
 def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride, chunk_paths,
               v_bins, v_max, x0) -> dict:
+    real = (int, float, np.integer, np.floating)
     for name, val in (("dt", dt), ("t_end", t_end), ("h_max", h_max)):
-        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+        if not (isinstance(val, real) and math.isfinite(val) and val > 0):
             raise ParameterError(f"{name}={val!r} must be a finite positive number")
-    if not (math.isfinite(t_burn) and t_burn >= 0):
-        raise ParameterError(f"t_burn={t_burn!r} must be >= 0")
+    if not (isinstance(t_burn, real) and math.isfinite(t_burn) and t_burn >= 0):
+        raise ParameterError(f"t_burn={t_burn!r} must be a finite number >= 0")
     if t_burn >= t_end:
         raise ParameterError(f"t_burn={t_burn:g} must be smaller than t_end={t_end:g} (nothing would be sampled)")
     paths = _positive_int("paths", paths)
@@ -219,6 +220,9 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
         xy_range = None
     if v_max is None:
         v_max = 2.0 * math.sqrt(2.0 * h_max)
+    elif not (isinstance(v_max, real) and math.isfinite(v_max) and v_max > 0):
+        # the kernel bins speeds by v * v_bins / v_max: a negative v_max would index from the end
+        raise ParameterError(f"v_max={v_max!r} must be a finite positive speed")
     try:
         g_bar = float(min(model.potential(np.array([left, right])))) if model.has_barriers else float("inf")
     except Exception:  # infinite side: the finite barrier's energy
