@@ -86,7 +86,8 @@ def test_nonfinite_or_wrong_length_x0_is_refused_before_running():
             sample_paths(DuffingImpact(), "splitting", dt=0.01, t_end=1.0, paths=1, every=10, x0=bad)
 
     kw = dict(dt=0.01, paths=2, t_end=2.0, t_burn=1.0)
-    for name, bad in (("v_max", 0.0), ("v_max", -3.0), ("t_burn", "1"), ("t_burn", float("nan"))):
+    for name, bad in (("v_max", 0.0), ("v_max", -3.0), ("t_burn", "1"), ("t_burn", float("nan")),
+                      ("scheduler", "thread"), ("scheduler", 4)):
         with pytest.raises(ParameterError, match=name):
             simulate_ensemble(DuffingImpact(), "splitting", **{**kw, name: bad})
     assert simulate_ensemble(DuffingImpact(), "splitting", xy_bins=None, **{**kw, "dt": np.float32(0.01)}).paths == 2

@@ -374,6 +374,10 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
                          chunk_paths, v_bins, v_max, x0)
     if check_dt:
         settings["step_rule"] = check_step(model, dt, h_max, sch)
+    local = scheduler in (None, "threads", "local")
+    if not (local or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")
+            or hasattr(scheduler, "submit")):  # before compiling: a typo must not cost a kernel build
+        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
     if resume and checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
     checkpoint_every = _positive_int("checkpoint_every", checkpoint_every)
@@ -426,7 +430,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
             flush()
 
     try:
-        if scheduler in (None, "threads", "local"):
+        if local:
             # one chunk per call of the nogil kernel, numba.get_num_threads() calls at a time
             pool = ThreadPoolExecutor(max_workers=nb.get_num_threads())
             try:
