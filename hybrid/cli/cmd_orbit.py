@@ -47,8 +47,8 @@ def comparison_tables(model, df, rows: int = 6) -> tuple[str, dict]:
     """Text tables of measured against predicted losses and quasi-periods, and the largest relative errors.
 
     ``df`` is an impact log from :meth:`ImpactLog.to_pandas`. The returned dict holds the maximum relative
-    deviation over the whole log for each formula: ``eq11``, ``eq13_paper``, ``eq13_exact``, ``eq14``,
-    ``eq14_two_level``.
+    deviation for each formula: over the whole log for ``eq11``, ``eq13_paper``, ``eq13_exact``; over the first
+    ``4 * rows + 1`` quasi-periods only for ``eq14`` and ``eq14_two_level`` (each T(H) is a quadrature).
 
     Examples
     --------
