@@ -153,7 +153,7 @@ def test_two_callable_laws_get_their_own_kernels():
 def test_splitting_refuses_nonlinear_damping_and_unknown_scheme():
     with pytest.raises(ModelError, match="linear in y"):
         generate_source(RayleighImpact(), SCHEMES["splitting"])
-    with pytest.raises(ModelError, match="unknown scheme"):
+    with pytest.raises(ParameterError, match="unknown scheme"):
         simulate_ensemble(DuffingImpact(), "rk4", paths=2, t_end=1.0, t_burn=0.0)
 
 

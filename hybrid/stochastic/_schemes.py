@@ -14,7 +14,7 @@ from __future__ import annotations
 import sympy as sp
 
 from hybrid.automaton import real_symbol
-from hybrid.errors import ModelError
+from hybrid.errors import ModelError, ParameterError
 
 _X, _Y = real_symbol("x"), real_symbol("y")
 
@@ -229,5 +229,5 @@ def get_scheme(scheme) -> Scheme:
     if isinstance(scheme, type) and issubclass(scheme, Scheme):
         return scheme()
     if scheme not in SCHEMES:
-        raise ModelError(f"unknown scheme {scheme!r}; choose one of {sorted(SCHEMES)}")
+        raise ParameterError(f"unknown scheme {scheme!r}; choose one of {sorted(SCHEMES)}")
     return SCHEMES[scheme]
