@@ -1,6 +1,6 @@
 """Example 5: reproduce the paper's Fig. 2 (p(H) of Example 1 for three barrier positions) and check it.
 
-Runs ``vibro figure 2`` (the same code path, through :func:`averaging.figures.run_figure`) into a directory, then
+Runs ``vibro figure 2`` (the same code path, through :func:`vibro.studies.figures.run_figure`) into a directory, then
 reads back the sidecar JSON and the CSV and checks, on the numbers:
 
 1. for each Δ, our jump averaging is closer to Monte Carlo than the paper's drift-only averaging, by more than twice
@@ -30,7 +30,7 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from averaging.figures import run_figure  # noqa: E402
+from vibro.studies.figures import run_figure  # noqa: E402
 
 
 def main(out_dir: Path) -> int:

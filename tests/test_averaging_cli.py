@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from problems import elastic_duffing
 
-from hybrid.cli import main
+from vibro.cli import main
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -1,4 +1,4 @@
-"""``vibro orbit``: in-process through hybrid.cli.main, plus one run of the installed script."""
+"""``vibro orbit``: in-process through vibro.cli.main, plus one run of the installed script."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 from problems import energy_loss_per_impact, exact_two_impact_loss
 
-from hybrid.cli import main
 from hybrid.deterministic import write_csv_atomically
 from models import Ma
+from vibro.cli import main
 
 BASE = ["orbit", "--model", "duffing", "--param", "a=1", "--param", "b=0.2", "--param", "c=0", "--param", "D=0",
         "--param", "delta=1.0", "--restitution", "ma:vc=0.4", "--x0", "0", "--v0", "2.2", "--t-end", "60"]

@@ -16,11 +16,11 @@ import pytest
 from problems import bouncing_ball, bouncing_ball_zeno_time
 
 from averaging import stationary_density
-from averaging.selection import choose, diagnose, solve
 from hybrid.deterministic import simulate_orbit
 from hybrid.errors import ModelError, NormalisationError, StepSizeError
 from hybrid.stochastic import StepSizeWarning, check_step, simulate_ensemble
 from models import DuffingImpact, Elastic, ImpactOscillator, Ma, Newton
+from vibro.solve import choose, diagnose, solve
 
 
 def _push(e=0.5, c=0.0, D=0.0):
@@ -174,7 +174,7 @@ def test_self_excited_damping_is_outside_the_calibrated_error_model():
 # the guard extremum inside each step
 @pytest.mark.parametrize("backend", ["heyoka", "scipy"])
 def test_orbit_impact_count_matches_quadrature(backend):
-    from averaging.workprecision import free_quasi_period
+    from vibro.studies.workprecision import free_quasi_period
 
     e, v0, t_end = 0.95, 2.2, 60.0
     m = DuffingImpact(restitution=Newton(e), c=0.0, D=0.0)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from hybrid.cli import main
+from vibro.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 CSV_COLUMNS = ["curve", "case", "method", "quantity", "x", "y", "z", "x_lo", "x_hi", "y_lo", "y_hi", "ci"]
@@ -203,7 +203,7 @@ def test_fig15_ring_complete_fig16_truncated(outdir):
 
 # ----------------------------------------------------------------------------------------------- reuse
 def test_finished_figure_is_reused_partial_is_recomputed(outdir, tmp_path):
-    from averaging.figures import run_figure
+    from vibro.studies.figures import run_figure
 
     d = tmp_path / "out"
     shutil.copytree(outdir, d)  # includes the Monte Carlo cache, so recomputing is cheap

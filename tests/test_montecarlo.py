@@ -19,7 +19,6 @@ import pytest
 from problems import elastic_duffing
 from scipy import stats as st
 
-from hybrid.cli import main as vibro
 from hybrid.errors import ModelError, ParameterError, RestitutionError, StepSizeError
 from hybrid.stochastic import (
     SCHEMES,
@@ -36,6 +35,7 @@ from hybrid.stochastic import (
     ziggurat_tables,
 )
 from models import CustomRestitution, DuffingImpact, Elastic, ImpactOscillator, Ma, Newton, RayleighImpact
+from vibro.cli import main as vibro
 
 INF = float("inf")
 
@@ -461,7 +461,7 @@ def test_cli_killed_run_resumes_bitwise(tmp_path):
                   "--checkpoint-every", "1"]
     vibro(args + ["--out", str(tmp_path / "full.csv")])  # uninterrupted, in process (also warms the cache)
     ck = tmp_path / "ck"
-    entry = "import sys; from hybrid.cli import main; sys.exit(main(sys.argv[1:]))"
+    entry = "import sys; from vibro.cli import main; sys.exit(main(sys.argv[1:]))"
     cmd = [sys.executable, "-c", entry] + args + ["--out", str(tmp_path / "res.csv"), "--checkpoint", str(ck)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.time() + 60

@@ -22,10 +22,11 @@ BACKENDS: dict[str, type[OrbitBackend]] = {"heyoka": HeyokaBackend, "scipy": Sci
 
 
 def _as_automaton(system, params):
-    """(automaton, parameter values, oscillator model or None)."""
-    from models import ImpactOscillator
+    """(automaton, parameter values, oscillator model or None).
 
-    if isinstance(system, ImpactOscillator):
+    A model is anything with ``to_automaton()`` (the models layer sits above this one, so no isinstance check).
+    """
+    if not isinstance(system, HybridAutomaton) and callable(getattr(system, "to_automaton", None)):
         model = system.with_params(**params) if params else system
         return model.to_automaton(), dict(model.params), model
     if isinstance(system, HybridAutomaton):

@@ -20,6 +20,7 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
+from hybrid.automaton import real_symbol
 from hybrid.errors import ModelError, ParameterError, StepSizeError
 from hybrid.io import atomic_write
 
@@ -60,8 +61,7 @@ def speed_scale(model, h_max: float) -> float:
     """
     import sympy as sp
 
-    from models import X, Y
-
+    X, Y = real_symbol("x"), real_symbol("y")
     m = model.ito_drift
     k = -sp.diff(m, Y)
     s2 = model.diffusion_squared
@@ -74,8 +74,7 @@ def speed_scale(model, h_max: float) -> float:
 
 def _linear_damping(model) -> float:
     """c_eff = -d m / d y at the equilibrium (x, y) = (0, 0): the damping rate of small oscillations."""
-    from models import X, Y
-
+    X, Y = real_symbol("x"), real_symbol("y")
     rate = -model.substitute(model.ito_drift.diff(Y)).subs({X: 0.0, Y: 0.0})
     try:
         return float(rate)

@@ -13,14 +13,13 @@ def register(subparsers) -> None:
 
     Examples
     --------
-    >>> from hybrid.cli import build_parser
+    >>> from vibro.cli import build_parser
     >>> args = build_parser().parse_args(["pdf", "--method", "jump", "--out", "p.csv"])
     >>> args.method, args.h_max, args.points
     ('jump', 4.0, 2000)
     """
-    from averaging import METHODS
-
     from .common import add_model_arguments
+    from .names import DENSITY_METHODS
 
     p = subparsers.add_parser(
         "pdf", help="stationary p(H) (and p(x, y)) by stochastic averaging of the energy envelope",
@@ -29,7 +28,7 @@ def register(subparsers) -> None:
                     "loss, or as jumps of the averaged energy. Prints E[H] and P(H < G(delta)).",
     )
     add_model_arguments(p)
-    p.add_argument("--method", choices=sorted(METHODS), default="paper",
+    p.add_argument("--method", choices=DENSITY_METHODS, default="paper",
                    help="how impacts enter: paper (eq. 13 drift), exact-two-impact, jump (default paper)")
     p.add_argument("--h-max", type=float, default=4.0, dest="h_max", help="upper energy (default 4)")
     p.add_argument("--points", type=int, default=2000, help="energy grid points (default 2000)")

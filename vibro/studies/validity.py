@@ -5,9 +5,9 @@
 * ``averaging_<grid>.csv`` / ``.png`` over the grids (c, D), (V_C, delta) and constant e: the L1 distance of each
   averaging method (paper, exact-two-impact, jump) from Monte Carlo, with the cells where the quasi-conservative
   assumption breaks hatched (damping work per cycle over H at the 90th-percentile energy above
-  :data:`averaging.selection.MAX_DAMPING_RATIO`, or impact loss per quasi-period above ``MAX_IMPACT_RATIO``);
+  :data:`vibro.solve.MAX_DAMPING_RATIO`, or impact loss per quasi-period above ``MAX_IMPACT_RATIO``);
   the same rows carry the loss ratios r_imp and r_damp, from which :func:`fit_error_model` fits the error model
-  of :mod:`averaging.selection`;
+  of :mod:`vibro.solve`;
 * ``mc_failures.csv`` / ``.png``: Monte Carlo L1 error against the elastic closed form over dt times the
   speed scale over the gap (dt against the barrier-crossing time), with what the step rule said (ok / warned /
   refused), for each scheme, and the stiff-potential refusal;
@@ -25,17 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.io import atomic_write, atomic_write_text, write_csv_atomically
-
-from .selection import (
-    L1_BINS,
-    MAX_DAMPING_RATIO,
-    MAX_IMPACT_RATIO,
-    bin_masses,
-    diagnose,
-    l1_between_histograms,
-    pick_scheme,
-    rebin_counts,
-)
+from vibro.solve import diagnose, pick_scheme
+from vibro.solve.errormodel import L1_BINS, MAX_DAMPING_RATIO, MAX_IMPACT_RATIO
+from vibro.solve.metrics import bin_masses, l1_between_histograms, rebin_counts
 
 AVERAGING_METHODS = ("paper", "exact-two-impact", "jump")
 
@@ -429,7 +421,8 @@ def solve_verification(out_dir=None, tol: float = 0.02, quick: bool = False, cas
     """
     import pandas as pd
 
-    from .selection import solve
+    from vibro.solve.solver import solve
+
     from .workprecision import _run_halves
 
     rows = []

@@ -11,21 +11,20 @@ import argparse
 import json
 import sys
 
-from hybrid.cli.common import add_model_arguments, model_from_args
 from hybrid.errors import ParameterError
+from vibro.cli.common import add_model_arguments, model_from_args
+from vibro.cli.names import SCHEMES
 
 
 def register(subparsers) -> None:
     """Add the ``mc`` subcommand."""
-    from hybrid.stochastic import SCHEMES
-
     p = subparsers.add_parser(
         "mc", help="Monte Carlo ensemble: histogram of H, moments, impact rate (compiled, parallel, reproducible)",
         description="Simulate an ensemble with a compiled scheme and write the histogram of H as CSV "
                     "(H_lo,H_hi,count,density; density normalised over [0, h_max]).",
     )
     add_model_arguments(p)
-    p.add_argument("--scheme", default="milstein", choices=sorted(SCHEMES), help="time-stepping scheme")
+    p.add_argument("--scheme", default="milstein", choices=SCHEMES, help="time-stepping scheme")
     p.add_argument("--dt", type=float, default=1e-3, help="time step")
     p.add_argument("--paths", type=int, default=256, help="number of paths")
     p.add_argument("--t-end", type=float, default=2200.0, help="end time of every path")

@@ -8,7 +8,7 @@ def register(subparsers) -> None:
 
     Examples
     --------
-    >>> from hybrid.cli import build_parser
+    >>> from vibro.cli import build_parser
     >>> args = build_parser().parse_args(["bench", "work-precision", "--out-dir", "wp", "--quick"])
     >>> args.task, args.quick, args.out_dir
     ('work-precision', True, 'wp')
@@ -39,17 +39,17 @@ def run(args) -> int:
     t0 = time.perf_counter()
     parts = tuple(s.strip() for s in args.parts.split(",")) if args.parts else None
     if args.task == "work-precision":
-        from averaging.workprecision import work_precision
+        from vibro.studies.workprecision import work_precision
 
         work_precision(args.out_dir, quick=args.quick, **({"parts": parts} if parts else {}))
     elif args.task == "validity":
-        from averaging.validity import validity_maps
+        from vibro.studies.validity import validity_maps
 
         validity_maps(args.out_dir, quick=args.quick, **({"parts": parts} if parts else {}))
     else:
         if parts:
             raise ParameterError("--parts applies to work-precision and validity only")
-        from averaging.validity import solve_verification
+        from vibro.studies.validity import solve_verification
 
         df = solve_verification(args.out_dir, tol=args.tol, quick=args.quick)
         print(df.to_string(index=False))

@@ -9,7 +9,7 @@ from hybrid.errors import ParameterError
 
 def add_model_arguments(parser: argparse.ArgumentParser, restitution_default: str | None = None) -> None:
     """Add ``--model``, ``--param NAME=VALUE`` (repeatable) and ``--restitution SPEC``."""
-    from models import MODELS
+    from .names import MODELS
 
     parser.add_argument(
         "--model", default="duffing", metavar="NAME|FILE.py:CLASS",

@@ -31,7 +31,7 @@ def register(subparsers) -> None:
 
 
 def _targets(token: str):
-    from averaging.figures import FIGURES
+    from vibro.studies.figures import FIGURES
 
     if token == "all":
         return sorted(FIGURES)
@@ -45,7 +45,7 @@ def _targets(token: str):
 
 
 def _print_table() -> int:
-    from averaging.figures import FIGURES
+    from vibro.studies.figures import FIGURES
 
     for n, spec in FIGURES.items():
         cases = "; ".join(c.label for c in spec.cases)
@@ -62,7 +62,7 @@ def run(args) -> int:
     targets = _targets(args.number)
     if args.dpi < 20 or args.dpi > 600:
         raise ParameterError(f"--dpi {args.dpi} is outside 20-600")
-    from averaging.figures import run_figure
+    from vibro.studies.figures import run_figure
 
     failures = 0
     for n in targets:

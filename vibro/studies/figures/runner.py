@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.errors import ParameterError
+from vibro.solve.metrics import bin_average, halves_noise_l1, joint_bin_average, l1_joint, l1_on_bins
 
-from .metrics import bin_average, halves_noise_l1, joint_bin_average, l1_joint, l1_on_bins
+from .mcdata import JOINT_GRID, mass_outside, mc_h_density, mc_xy_density, xy_outside, xy_range  # noqa: F401 (xy_range re-exported)
 from .specs import FIGURES, PRESETS, Case, FigureSpec, figure_spec
 from .store import MCCache, finished, sha256_file, write_json
 
@@ -27,8 +28,6 @@ ANALYTIC_METHODS = ("paper", "jump")
 """Analytic methods drawn in every figure: the paper's drift-only averaging and our jump variant."""
 ANALYTIC_POINTS = 1500
 """Energy grid points of each analytic density."""
-JOINT_GRID = 121
-"""Analytic joint density grid points per axis (CSV and contour plot)."""
 
 
 @dataclass
@@ -99,56 +98,6 @@ def _ci(est):
     return float(getattr(est, "ci", float("nan"))) if est is not None else float("nan")
 
 
-def _mc_h_density(stats):
-    d = stats.h_density()
-    return np.asarray(d[1] if isinstance(d, tuple) else d, dtype=float)
-
-
-def _mc_xy_density(stats):
-    d = stats.xy_density()
-    return np.asarray(d[-1] if isinstance(d, tuple) else d, dtype=float)
-
-
-def _mass_outside(stats) -> float:
-    """Fraction of Monte Carlo samples above h_max (NaN when the engine does not count them)."""
-    total = getattr(stats, "total", None)
-    if callable(total):
-        try:
-            n = total("samples")
-            return total("h_over") / n if n else float("nan")
-        except (ValueError, KeyError, IndexError):
-            pass
-    for name in ("h_overflow", "h_outside", "overflow", "h_above"):
-        if hasattr(stats, name):
-            over = float(np.sum(getattr(stats, name)))
-            total = float(np.sum(stats.h_counts)) + over
-            return over / total if total > 0 else float("nan")
-    return float("nan")
-
-
-def _xy_outside(stats) -> float:
-    """Fraction of samples outside the joint-histogram window (NaN when not counted)."""
-    try:
-        n = stats.total("samples")
-        return stats.total("xy_out") / n if n else float("nan")
-    except Exception:  # engine without the count
-        return float("nan")
-
-
-def xy_range(case: Case) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Joint-density window: x in [-Δ, Δ] and |y| <= sqrt(2 h_max) (H <= h_max there).
-
-    Examples
-    --------
-    >>> from averaging.figures import FIGURES
-    >>> xy_range(FIGURES[2].cases[1])[0]
-    (-1.0, 1.0)
-    """
-    d = case.delta
-    ymax = float(np.sqrt(2.0 * case.h_max))
-    return ((-d, d), (-ymax, ymax))
-
-
 def mc_settings(spec: FigureSpec, case: Case, preset: str) -> dict:
     """Keyword arguments of ``simulate_ensemble`` for one case (for one half; paths are halved)."""
     size = spec.size(preset)
@@ -166,7 +115,7 @@ def case_seeds(case: Case, settings: dict) -> tuple[int, int]:
 
     Examples
     --------
-    >>> from averaging.figures import FIGURES
+    >>> from vibro.studies.figures import FIGURES
     >>> a = case_seeds(FIGURES[2].cases[0], {"dt": 0.01}); a == case_seeds(FIGURES[2].cases[0], {"dt": 0.01})
     True
     """
@@ -232,8 +181,8 @@ def case_metrics(spec: FigureSpec, res: CaseResult) -> dict:
         return out
     mc = res.mc
     edges = np.asarray(mc.h_edges, dtype=float)
-    p_mc = _mc_h_density(mc)
-    pa, pb = (_mc_h_density(h) for h in res.halves)
+    p_mc = mc_h_density(mc)
+    pa, pb = (mc_h_density(h) for h in res.halves)
     widths = np.diff(edges)
     span = edges[-1] - edges[0]
     k = int(np.argmax(p_mc))
@@ -242,8 +191,8 @@ def case_metrics(spec: FigureSpec, res: CaseResult) -> dict:
         "mean_energy": _value(mc.mean_energy), "mean_energy_ci": _ci(mc.mean_energy),
         "prob_below_barrier": _value(getattr(mc, "prob_below_barrier", None)),
         "impact_rate": _value(getattr(mc, "impact_rate", None)),
-        "mass_above_h_max": _mass_outside(mc),
-        "mass_outside_xy_window": _xy_outside(mc),
+        "mass_above_h_max": mass_outside(mc),
+        "mass_outside_xy_window": xy_outside(mc),
         "mass_in_last_5pct_of_range": float(np.sum((p_mc * widths)[edges[1:] > edges[0] + 0.95 * span])),
         "noise_l1_halves": halves_noise_l1(pa, pb, widths),
         "seeds": list(res.mc_seeds), "wall_s": res.mc_wall, "cached": res.mc_cached,
@@ -261,8 +210,8 @@ def case_metrics(spec: FigureSpec, res: CaseResult) -> dict:
     out["l1_energy"] = l1
     if spec.kind == "joint":
         xe, ye = (np.asarray(e, dtype=float) for e in mc.xy_edges)
-        pxy = _mc_xy_density(mc)
-        pxa, pxb = (_mc_xy_density(h) for h in res.halves)
+        pxy = mc_xy_density(mc)
+        pxa, pxb = (mc_xy_density(h) for h in res.halves)
         area = np.outer(np.diff(ye), np.diff(xe))
         lj = {f"{m}_vs_mc": l1_joint(joint_bin_average(sd.joint, xe, ye), pxy, xe, ye)
               for m, sd in res.densities.items()}
@@ -356,10 +305,10 @@ def curve_rows(spec: FigureSpec, results: list[CaseResult]):
                                         "quantity": "p(H)", "x": np.asarray(sd.H), "y": np.asarray(sd.p)}))
         if res.mc is not None:
             edges = np.asarray(res.mc.h_edges, dtype=float)
-            pa, pb = (_mc_h_density(h) for h in res.halves)
+            pa, pb = (mc_h_density(h) for h in res.halves)
             frames.append(pd.DataFrame({
                 "curve": f"{label} | mc", "case": label, "method": "mc", "quantity": "p(H)",
-                "x": 0.5 * (edges[1:] + edges[:-1]), "y": _mc_h_density(res.mc), "x_lo": edges[:-1],
+                "x": 0.5 * (edges[1:] + edges[:-1]), "y": mc_h_density(res.mc), "x_lo": edges[:-1],
                 "x_hi": edges[1:], "ci": 1.96 * 0.5 * np.abs(pa - pb),
             }))
         if spec.kind == "joint":
@@ -378,7 +327,7 @@ def curve_rows(spec: FigureSpec, results: list[CaseResult]):
                 hi_x, hi_y = np.meshgrid(xe[1:], ye[1:])
                 frames.append(pd.DataFrame({"curve": f"{label} | mc joint", "case": label, "method": "mc",
                                             "quantity": "p(x,y)", "x": XX.ravel(), "y": YY.ravel(),
-                                            "z": _mc_xy_density(res.mc).ravel(), "x_lo": lo_x.ravel(),
+                                            "z": mc_xy_density(res.mc).ravel(), "x_lo": lo_x.ravel(),
                                             "x_hi": hi_x.ravel(), "y_lo": lo_y.ravel(), "y_hi": hi_y.ravel()}))
     table = pd.concat(frames, ignore_index=True)
     cols = ["curve", "case", "method", "quantity", "x", "y", "z", "x_lo", "x_hi", "y_lo", "y_hi", "ci"]

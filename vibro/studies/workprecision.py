@@ -26,8 +26,8 @@ import numpy as np
 from scipy import integrate
 
 from hybrid.io import atomic_write, write_csv_atomically
-
-from .selection import L1_BINS, bin_masses, l1_between_histograms, rebin_counts
+from vibro.solve.errormodel import L1_BINS
+from vibro.solve.metrics import bin_masses, l1_between_histograms, rebin_counts
 
 MC_LABELS = {"naive": "naive flip", "em": "Euler-Maruyama (located)", "milstein": "Milstein (located)",
              "splitting": "splitting (BAOAB)"}
@@ -61,8 +61,7 @@ class ElasticOracle:
     def for_model(cls, model) -> ElasticOracle:
         """The oracle for a model with linear damping and additive noise (its restitution law is ignored)."""
         from hybrid.errors import ModelError
-
-        from .selection import _linear_damping_constant, _sigma2_constant
+        from vibro.solve.diagnostics import _linear_damping_constant, _sigma2_constant
 
         c, s2 = _linear_damping_constant(model), _sigma2_constant(model)
         if c is None or s2 is None or not (c > 0 and s2 > 0):
@@ -199,7 +198,7 @@ def mc_work_precision(quick: bool = True, seed: int = 11, progress=print):
 def fit_bias_constants(df) -> dict:
     """Fit L1 bias ~ C dt**p (p = declared weak order with barriers) per scheme: the median of
     (L1 - noise) / dt**p over the largest-ensemble rows whose noise is below 40 % of the error."""
-    from .selection import _scheme_order
+    from vibro.solve.planner import scheme_order as _scheme_order
 
     out = {}
     ok = df[df.status == "ok"]
@@ -216,7 +215,7 @@ def fit_bias_constants(df) -> dict:
 
 def reference_mc(model, h_max, quick: bool, seed: int = 5, progress=print):
     """A converged Monte Carlo reference (splitting, small dt, many paths) and its measured noise."""
-    from .selection import pick_scheme
+    from vibro.solve.planner import pick_scheme
 
     scheme = pick_scheme(model)
     dt = 0.005 if scheme == "splitting" else 0.002
@@ -232,8 +231,7 @@ def averaging_work_precision(quick: bool = True, progress=print):
 
     from averaging import stationary_density
     from models import DuffingImpact
-
-    from .selection import diagnose
+    from vibro.solve.diagnostics import diagnose
 
     model = DuffingImpact()  # Example 1, Fig. 2 parameters with delta = 1.0
     h_max = diagnose(model).h_max  # stationary mass above it < 1e-5

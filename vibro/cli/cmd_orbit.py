@@ -13,7 +13,7 @@ def register(subparsers) -> None:
 
     Examples
     --------
-    >>> from hybrid.cli import build_parser
+    >>> from vibro.cli import build_parser
     >>> args = build_parser().parse_args(["orbit", "--v0", "2.2", "--t-end", "5"])
     >>> args.backend, args.v0
     ('heyoka', 2.2)

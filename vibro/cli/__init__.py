@@ -1,6 +1,6 @@
 """The ``vibro`` command line: one entry point, one module per subcommand.
 
-Each module ``hybrid/cli/cmd_<name>.py`` defines ``register(subparsers)``, which adds its parser and sets
+Each module ``vibro/cli/cmd_<name>.py`` defines ``register(subparsers)``, which adds its parser and sets
 ``func`` to a callable ``func(args) -> int``. Bad input exits with status 2 and a one-line reason.
 """
 
@@ -12,6 +12,7 @@ import pkgutil
 import sys
 
 from hybrid.errors import VibroError
+from vibro import __version__
 
 
 class _Parser(argparse.ArgumentParser):
@@ -30,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     True
     """
     parser = _Parser(prog="vibro", description="Stochastic vibro-impact systems: orbits, densities, Monte Carlo.")
+    parser.add_argument("--version", action="version", version=f"vibro {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):

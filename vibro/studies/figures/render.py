@@ -6,6 +6,8 @@ import textwrap
 
 import numpy as np
 
+from .mcdata import JOINT_GRID, mc_h_density, mc_xy_density, xy_range
+
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c")
 MARKERS = ("o", "^", "s")  # the paper's ● ▲ ■
 
@@ -39,7 +41,6 @@ def render_figure(spec, results, metrics, caption, path, dpi=110) -> None:
 
 
 def _render_energy(spec, results, metrics, caption, path, dpi):
-    from .runner import _mc_h_density
 
     fig = _figure(11.0, 5.6)
     nlines = _caption(fig, caption, 190)
@@ -58,7 +59,7 @@ def _render_energy(spec, results, metrics, caption, path, dpi):
             if res.mc is not None:
                 e = np.asarray(res.mc.h_edges)
                 c = 0.5 * (e[1:] + e[:-1])
-                p = _mc_h_density(res.mc)
+                p = mc_h_density(res.mc)
                 ax.plot(c, np.where(p > 0, p, np.nan), mk, color=col, ms=3.5, mfc="none", mew=0.9,
                         label=f"{res.case.label}, Monte Carlo" if ax is axes[0] else None)
                 if np.any(p > 0):
@@ -88,7 +89,6 @@ def _render_energy(spec, results, metrics, caption, path, dpi):
 
 
 def _render_joint(spec, results, metrics, caption, path, dpi):
-    from .runner import JOINT_GRID, _mc_xy_density, xy_range
 
     res = results[0]
     (x0, x1), (y0, y1) = xy_range(res.case)
@@ -98,7 +98,7 @@ def _render_joint(spec, results, metrics, caption, path, dpi):
     if res.mc is not None:
         xe, ye = (np.asarray(e) for e in res.mc.xy_edges)
         label = "c  Monte Carlo" + ("" if spec.in_paper_mc else " (our addition; not in the paper)")
-        panels.append((label, xe, ye, _mc_xy_density(res.mc)))  # cell edges: drawn as the histogram's cells
+        panels.append((label, xe, ye, mc_xy_density(res.mc)))  # cell edges: drawn as the histogram's cells
     vmax = max(float(np.nanmax(p)) for *_, p in panels)
     levels = np.linspace(0.0, vmax, 16)
     fig = _figure(4.0 * len(panels) + 1.0, 5.4)

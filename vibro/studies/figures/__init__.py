@@ -7,14 +7,15 @@ whose sidecar matches the current spec hash is reused.
 
 Examples
 --------
->>> from averaging.figures import FIGURES, figure_spec
+>>> from vibro.studies.figures import FIGURES, figure_spec
 >>> sorted(FIGURES)[0], sorted(FIGURES)[-1]
 (2, 16)
 >>> figure_spec(2).cases[0].label
 'Δ = 0.8'
 """
 
-from .metrics import bin_average, halves_noise_l1, joint_bin_average, l1_joint, l1_on_bins
+from vibro.solve.metrics import bin_average, halves_noise_l1, joint_bin_average, l1_joint, l1_on_bins
+
 from .runner import ANALYTIC_METHODS, FigureResult, output_names, run_figure, run_figures, xy_range
 from .specs import ENERGY_FIGURES, FIGURES, PRESETS, VDP_READING, Case, FigureSpec, MCSize, figure_spec
 

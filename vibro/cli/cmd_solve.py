@@ -8,7 +8,7 @@ def register(subparsers) -> None:
 
     Examples
     --------
-    >>> from hybrid.cli import build_parser
+    >>> from vibro.cli import build_parser
     >>> args = build_parser().parse_args(["solve", "--tol", "0.05", "--param", "delta=0.8"])
     >>> args.tol, args.method, args.param
     (0.05, 'auto', ['delta=0.8'])
@@ -37,8 +37,8 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     """Choose, (optionally) run, and report."""
-    from averaging.selection import choose, solve
     from hybrid.errors import ParameterError
+    from vibro.solve import choose, solve
 
     from .common import model_from_args
 

@@ -1,0 +1,73 @@
+"""The layers: imports run one way only, hybrid <- models <- averaging <- vibro, function-local imports included.
+
+Also: the command line starts without the heavy libraries, and the names its parsers show match the registries.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+LAYERS = ["hybrid", "models", "averaging", "vibro"]
+"""Lowest first: a module may import its own layer and the ones before it."""
+
+
+def _imported_packages(path: Path, package: str):
+    """(line, top-level project package) for every import statement in a file, nested ones included."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield node.lineno, alias.name.split(".")[0]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: stays inside its own package
+                yield node.lineno, package
+            elif node.module:
+                yield node.lineno, node.module.split(".")[0]
+
+
+def _violations():
+    bad = []
+    for rank, package in enumerate(LAYERS):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for line, target in _imported_packages(path, package):
+                if target in LAYERS and LAYERS.index(target) > rank:
+                    bad.append(f"{path.relative_to(ROOT)}:{line} imports {target} (above {package})")
+    return bad
+
+
+def test_imports_point_down_the_layers_only():
+    assert _violations() == []
+
+
+def test_the_walker_sees_function_local_imports(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def f():\n    from vibro.solve import solve\n    import averaging.jump\n")
+    assert sorted(t for _, t in _imported_packages(f, "hybrid")) == ["averaging", "vibro"]
+
+
+def test_cli_names_match_the_registries():
+    from averaging import METHODS
+    from hybrid.stochastic import SCHEMES
+    from models import MODELS
+    from vibro.cli import names
+
+    assert names.SCHEMES == tuple(sorted(SCHEMES))
+    assert names.DENSITY_METHODS == tuple(sorted(METHODS))
+    assert names.MODELS == tuple(sorted(MODELS))
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["--version"], ["mc", "--help"], ["pdf", "--help"],
+                                  ["orbit", "--help"], ["solve", "--help"], ["figure", "--help"]])
+def test_cli_help_imports_no_heavy_library(argv):
+    # what makes `vibro --help` slow is importing sympy, numba or scipy; assert on the modules, not on a time
+    heavy = ("sympy", "numba", "scipy", "matplotlib", "pandas")
+    code = (f"import sys; from vibro.cli import main\ntry:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
+            f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"

@@ -1,0 +1,11 @@
+"""Registry names the parsers show, kept here so that ``vibro --help`` imports neither sympy nor numba.
+
+``tests/test_architecture.py`` checks that each tuple equals its registry, so they cannot drift apart.
+"""
+
+SCHEMES = ("em", "milstein", "naive", "splitting")
+"""Names of ``hybrid.stochastic.SCHEMES``."""
+DENSITY_METHODS = ("exact-two-impact", "jump", "paper")
+"""Names of ``averaging.METHODS``."""
+MODELS = ("duffing", "duffing-vdp", "rayleigh")
+"""Names of ``models.MODELS``."""

@@ -1,0 +1,165 @@
+"""Choose the cheapest method that is predicted to reach a tolerance in the L1 distance of p(H).
+
+``choose(model, tol)`` looks at the model before computing anything expensive:
+
+1. **exact**: the impacts are elastic at every *reachable* impact speed (law elastic, or V_C so high that the
+   stationary impact-speed tail P(|v| > V_C) under the elastic density is below tol/10), the damping is linear
+   (h = c*y) and the noise additive. Then p(H) is proportional to T(H) exp(-2cH/sigma**2), exactly.
+2. **paper** averaging (the drift form of the impact loss) when the energy lost per cycle is small.
+3. **jump** averaging (impacts as jumps of the averaged energy) when impacts dominate the dissipation but each
+   cycle still loses a small share of the energy between impacts.
+4. **Monte Carlo** otherwise, planned by :mod:`vibro.solve.planner`.
+
+The predicted error of each averaging method is the error model of :mod:`vibro.solve.errormodel`. Averaging is
+refused when the 90th-percentile energy level loses more than ``MAX_DAMPING_RATIO`` of its energy per cycle to the
+damping force, or more than ``MAX_IMPACT_RATIO`` to impacts: the quasi-conservative assumption is broken there.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+from hybrid.errors import ModelError, ParameterError
+
+from .diagnostics import Diagnostics, diagnose
+from .errormodel import MAX_DAMPING_RATIO, MAX_IMPACT_RATIO, predict_averaging_error
+from .planner import plan_monte_carlo
+
+
+@dataclass
+class Choice:
+    """The chosen method, why, its predicted L1 error of p(H) and its predicted cost (seconds).
+
+    Attributes
+    ----------
+    method : str
+        ``exact``, ``paper``, ``jump`` or ``monte-carlo``.
+    reason : str
+    expected_error : float
+    expected_cost : float
+    settings : dict
+        For Monte Carlo: scheme, dt, paths, t_end, t_burn.
+    predictions : dict
+        Predicted L1 error of every candidate (inf when refused).
+    diagnostics : Diagnostics
+    """
+
+    method: str
+    reason: str
+    expected_error: float
+    expected_cost: float
+    settings: dict
+    predictions: dict
+    diagnostics: Diagnostics
+
+    def summary(self) -> str:
+        """Human-readable lines: method, why, expected error and cost."""
+        s = [f"method: {self.method}", f"why: {self.reason}",
+             f"expected L1 error of p(H): {self.expected_error:.3g}", f"expected cost: {self.expected_cost:.3g} s"]
+        if self.settings:
+            s.append("settings: " + ", ".join(f"{k}={v}" for k, v in self.settings.items()))
+        return "\n".join(s)
+
+
+def check_request(tol, max_cost) -> None:
+    if not (0.0 < tol < 2.0):
+        raise ParameterError(f"tol={tol!r}: an L1 distance between densities lies in (0, 2); use e.g. tol=0.02")
+    if not max_cost > 0:
+        raise ParameterError(f"max_cost={max_cost!r} must be a positive wall time in seconds, e.g. max_cost=600")
+
+
+def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Diagnostics | None = None,
+           mc_pilot: bool = True, seed: int = 1) -> Choice:
+    """Pick the cheapest method predicted to reach ``tol`` in the L1 distance of p(H).
+
+    Parameters
+    ----------
+    model : ImpactOscillator
+    tol : float
+        Target L1 distance of p(H) (on a common grid of ``L1_BINS`` bins) from the true stationary density.
+    max_cost : float
+        Wall-time budget for Monte Carlo in seconds; a longer run is capped and the expected error raised.
+    diagnostics : Diagnostics, optional
+        Reuse a :func:`diagnose` result.
+    mc_pilot : bool
+        Measure the Monte Carlo statistical constant with a short pilot run (otherwise use a default).
+    seed : int
+
+    Returns
+    -------
+    Choice
+
+    Examples
+    --------
+    >>> from models import DuffingImpact, Elastic
+    >>> choose(DuffingImpact(restitution=Elastic())).method
+    'exact'
+    """
+    check_request(tol, max_cost)
+    try:
+        diag = diagnostics if diagnostics is not None else diagnose(model)
+    except ModelError as exc:
+        return mc_choice(model, tol, None, f"averaging does not apply ({exc})", {}, max_cost, mc_pilot, seed)
+    preds = {}
+    reasons = []
+    elastic_enough = diag.elastic_law or diag.tail_impact_speed < tol / 10.0
+    preds["exact"] = predict_averaging_error("exact", diag) if elastic_enough else math.inf
+    heavy = diag.r_damp_p90 > MAX_DAMPING_RATIO or diag.r_imp_p90 > MAX_IMPACT_RATIO
+    outside = diag.self_excited
+    for name in ("paper", "jump"):
+        preds[name] = math.inf if (heavy or outside) else predict_averaging_error(name, diag)
+    if preds["exact"] <= tol:
+        why = ("impacts are elastic" if diag.elastic_law else
+               f"impacts faster than V_C={diag.elastic_below:g} are rare: P(|v| > V_C) = "
+               f"{diag.tail_impact_speed:.2g} < tol/10 under the elastic density")
+        return Choice("exact", why + "; linear damping and additive noise make p(H) ~ T(H) exp(-beta H) exact",
+                      preds["exact"], averaging_cost(), {}, preds, diag)
+    if outside and not heavy:
+        reasons.append(
+            "averaging not trusted: the damping feeds energy in somewhere (self-excited, e.g. van der Pol), outside "
+            "the dissipative models on which the averaging error model was calibrated"
+        )
+    elif heavy:
+        reasons.append(
+            f"averaging refused: the 90th-percentile energy loses {diag.r_damp_p90:.2f} of H per cycle to damping "
+            f"(limit {MAX_DAMPING_RATIO}) and {diag.r_imp_p90:.2f} to impacts (limit {MAX_IMPACT_RATIO}), "
+            "so the system is not quasi-conservative"
+        )
+    if not (heavy or outside):
+        for name in ("paper", "jump"):  # cheapest first
+            if preds[name] <= tol:
+                why = (f"energy lost per cycle is small (impacts {diag.r_imp:.3f} H, damping {diag.r_damp:.3f} H "
+                       "on average)") if name == "paper" else (
+                       f"impact losses ({diag.r_imp:.3f} H per cycle) are too large for a drift but well described "
+                       "as jumps of the averaged energy")
+                return Choice(name, why, preds[name], averaging_cost(), {}, preds, diag)
+        reasons.append(
+            f"no averaging method is predicted within tol={tol:g} (paper {preds['paper']:.3f}, "
+            f"jump {preds['jump']:.3f})"
+        )
+    return mc_choice(model, tol, diag, "; ".join(reasons), preds, max_cost, mc_pilot, seed)
+
+
+def averaging_cost() -> float:
+    # one density on a 2000-point grid: 0.01-0.03 s in the work-precision bench, plus the diagnostics already spent
+    return 0.05
+
+
+
+def mc_choice(model, tol, diag, reason, preds, max_cost, pilot, seed) -> Choice:
+    """A Monte Carlo :class:`Choice` planned for ``tol`` (``diag`` may be None when averaging does not apply)."""
+    h_max = diag.h_max if diag is not None else 20.0
+    relax = diag.relaxation_time if diag is not None else math.nan
+    settings, expected, cost, capped = plan_monte_carlo(model, tol, h_max, relax, max_cost, pilot, seed)
+    if capped:
+        reason += f"; Monte Carlo capped at max_cost={max_cost:g} s, so the tolerance is not reached"
+        warnings.warn(f"Monte Carlo capped at max_cost={max_cost:g} s: expected L1 {expected:.3g} > tol={tol:g}",
+                      stacklevel=3)
+    preds = dict(preds)
+    preds["monte-carlo"] = expected
+    if diag is None:
+        diag = Diagnostics(False, False, False, 0.0, math.nan, math.nan, math.nan, math.nan, math.nan, h_max, math.nan,
+                           ["averaging does not apply"])
+    return Choice("monte-carlo", reason or "Monte Carlo", expected, cost, settings, preds, diag)

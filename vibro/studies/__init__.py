@@ -1,0 +1,1 @@
+"""Studies over many runs: work-precision charts, validity maps, the paper's figures."""
