@@ -36,8 +36,7 @@ class ImpactMethod:
     def jump_target(self, law, excess):
         """Post-impact excess energy e(v)**2 (H - G(delta)) of a single impact (used by jump methods)."""
         excess = np.asarray(excess, dtype=float)
-        e = law.coefficient(np.sqrt(2.0 * excess))
-        return e * e * excess
+        return excess - law.impact_loss(excess)
 
     def speed_breakpoints(self, law) -> list[float]:
         """Impact speeds where the loss is not smooth (kinks of the restitution law)."""
@@ -61,9 +60,7 @@ class PaperMethod(ImpactMethod):
     description = "eq. 13: drift -(1 - e^4)(H - G(delta))/T"
 
     def loss(self, law, excess):
-        excess = np.asarray(excess, dtype=float)
-        e = law.coefficient(np.sqrt(2.0 * excess))
-        return (1.0 - e**4) * excess
+        return law.two_impact_loss(excess, reading="paper")
 
 
 class ExactTwoImpactMethod(ImpactMethod):
@@ -80,11 +77,7 @@ class ExactTwoImpactMethod(ImpactMethod):
     description = "drift -(1 - e1^2 e2^2)(H - G(delta))/T, e2 = e(e1 v)"
 
     def loss(self, law, excess):
-        excess = np.asarray(excess, dtype=float)
-        v = np.sqrt(2.0 * excess)
-        e1 = law.coefficient(v)
-        e2 = law.coefficient(e1 * v)
-        return (1.0 - e1 * e1 * e2 * e2) * excess
+        return law.two_impact_loss(excess, reading="exact")
 
     def speed_breakpoints(self, law) -> list[float]:
         out = set(_law_breakpoints(law))

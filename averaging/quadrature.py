@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.errors import ParameterError
+from models.levels import solve_level
 
 from .symbolic import averaging_equations, fingerprint
 
@@ -102,47 +103,6 @@ def geometry(model) -> Geometry:
     return geo
 
 
-def _level_side(model, H, sign, start):
-    """Solve G(sign*z) = H for z >= start (G increasing there): bracket by doubling, bisect, polish by Newton.
-
-    Returns z and a mask of levels where no root was found (G does not reach H beyond ``start``).
-    """
-    H = np.asarray(H, dtype=float)
-    lo = np.full_like(H, start)
-    hi = np.maximum(2.0 * lo, 1.0) + 0.0 * H
-    G = model.potential
-    for _ in range(80):
-        short = G(sign * hi) < H
-        if not short.any():
-            break
-        lo = np.where(short, hi, lo)
-        hi = np.where(short, 2.0 * hi, hi)
-    missing = G(sign * hi) < H
-    # safeguarded Newton (G' = sign * g > 0 on the bracket): bisect whenever the Newton step leaves [lo, hi]
-    # start from the harmonic guess sqrt(2H/k0) when it lies above the root (hardening), else from the bracket
-    eps = 1e-6 * max(start, 1.0)
-    k0 = float(sign * model.restoring(sign * eps) / eps)
-    z = hi.copy()
-    if k0 > 0:
-        guess = np.clip(np.sqrt(2.0 * np.maximum(H, 0.0) / k0), lo, hi)
-        z = np.where(G(sign * guess) >= H, guess, hi)
-    for _ in range(100):
-        Gz = G(sign * z)
-        over = Gz > H
-        lo = np.where(over, lo, z)
-        hi = np.where(over, z, hi)
-        gz = sign * model.restoring(sign * z)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            newton = z - (Gz - H) / gz
-        ok = (newton >= lo) & (newton <= hi) & np.isfinite(newton)
-        znew = np.where(ok, newton, 0.5 * (lo + hi))
-        done = ok & (np.abs(znew - z) <= 1e-15 * np.abs(z) + 1e-300)
-        z = znew
-        if done.all():
-            break
-    return z, missing
-
-
 def turning_points(model, H):
     """Turning points (A-, A+) with G(A) = H on each side of 0, continued beyond the barriers for H > G(delta).
 
@@ -168,7 +128,7 @@ def turning_points(model, H):
     left, right = geo.barriers
     out = []
     for sign, bound in ((-1.0, left), (+1.0, right)):
-        z, missing = _level_side(geo, H, sign, 0.0)
+        z, missing = solve_level(geo.potential, geo.restoring, H, sign, 0.0)
         if np.isfinite(bound) and missing.any():
             b = abs(bound)
             Gb = float(geo.potential(sign * b))

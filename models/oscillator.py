@@ -24,6 +24,7 @@ from scipy import integrate
 from hybrid.automaton import HybridAutomaton, Mode, Transition, _as_expr, real_symbol
 from hybrid.errors import ModelError, ParameterError
 
+from .levels import solve_level
 from .restitution import Elastic, RestitutionLaw
 
 X = real_symbol("x")
@@ -363,24 +364,13 @@ class ImpactOscillator:
         return lo, hi
 
     def _solve_level(self, H, sign, bound):
-        """Root of G(sign * s) = H for s > 0 by vectorised bracketing and bisection (G is monotone there)."""
+        """Root of G(sign * s) = H for s > 0, clipped to the barrier at ``bound`` (G is monotone there)."""
         H = np.atleast_1d(H).astype(float)
+        z, missing = solve_level(self.potential, self.restoring, H, sign)
         limit = abs(bound) if np.isfinite(bound) else np.inf
-        upper = np.where(np.isfinite(limit), limit, 1.0) * np.ones_like(H)
-        if not np.isfinite(limit):
-            for _ in range(200):
-                short = self.potential(sign * upper) < H
-                if not short.any():
-                    break
-                upper = np.where(short, upper * 2.0, upper)
-        lower = np.zeros_like(H)
-        beyond = self.potential(sign * upper) <= H
-        for _ in range(120):
-            mid = 0.5 * (lower + upper)
-            below = self.potential(sign * mid) < H
-            lower = np.where(below, mid, lower)
-            upper = np.where(below, upper, mid)
-        return sign * np.where(beyond, upper, 0.5 * (lower + upper))
+        if missing.any() and not np.isfinite(limit):
+            raise ModelError(f"no turning point at H={H[missing][0]:.6g}: the potential does not confine")
+        return sign * np.where(missing, limit, np.minimum(z, limit))
 
     def amplitude(self, H):
         """Turning amplitude A(H) with G(A) = H on the positive side (root finding; subclasses may override)."""
@@ -402,6 +392,37 @@ class ImpactOscillator:
         m = len(self.f)
         pairs = sum(self.intensity[j, k] * self.f[j] * self.f[k] for j in range(m) for k in range(m))
         return sp.expand(2 * self.epsilon * pairs)
+
+    def linear_damping_constant(self) -> float | None:
+        """c when the damping force is eps*h = c*y with a constant c (parameters substituted), else None.
+
+        The one test of "linear damping" in the project: the exact elastic density, the method chooser, the Monte
+        Carlo speed scale and the oracles all ask the model.
+
+        Examples
+        --------
+        >>> ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.0}, barriers=None).linear_damping_constant()
+        0.1
+        >>> ImpactOscillator("x", "c*y**3", parameters={"c": 0.1, "D": 0.0}, barriers=None).linear_damping_constant()
+        """
+        h = sp.expand(self.substitute(self.epsilon * self.h))
+        c = sp.diff(h, Y)
+        if c.free_symbols & {X, Y} or sp.simplify(h - c * Y) != 0:
+            return None
+        return float(c)
+
+    def constant_noise_intensity(self) -> float | None:
+        """sigma**2 (parameters substituted) when it does not depend on the state, else None.
+
+        Examples
+        --------
+        >>> ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.05}, barriers=None).constant_noise_intensity()
+        0.1
+        """
+        s2 = self.substitute(self.diffusion_squared)
+        if s2.free_symbols & {X, Y}:
+            return None
+        return float(s2)
 
     @property
     def additive_noise(self) -> bool:

@@ -15,7 +15,6 @@ Examples
 
 from ._base import Advance, OrbitBackend
 from ._core import BACKENDS, simulate_orbit
-from ._formulas import impact_loss, quasi_period, two_impact_loss
 from ._heyoka import HeyokaBackend
 from ._result import STATUSES, ImpactLog, OrbitResult, Trajectory, write_csv_atomically
 from ._scipy import METHODS, ScipyBackend
@@ -23,6 +22,5 @@ from ._zeno import ZenoDetector
 
 __all__ = [
     "BACKENDS", "METHODS", "STATUSES", "Advance", "HeyokaBackend", "ImpactLog", "OrbitBackend", "OrbitResult",
-    "ScipyBackend", "Trajectory", "ZenoDetector", "impact_loss", "quasi_period", "simulate_orbit",
-    "two_impact_loss", "write_csv_atomically",
+    "ScipyBackend", "Trajectory", "ZenoDetector", "simulate_orbit", "write_csv_atomically",
 ]

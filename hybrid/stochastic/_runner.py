@@ -59,16 +59,9 @@ def speed_scale(model, h_max: float) -> float:
     >>> round(speed_scale(DuffingImpact(), 4.0), 6)
     1.414214
     """
-    import sympy as sp
-
-    X, Y = real_symbol("x"), real_symbol("y")
-    m = model.ito_drift
-    k = -sp.diff(m, Y)
-    s2 = model.diffusion_squared
-    if not ((k.free_symbols | s2.free_symbols) & {X, Y}) and sp.diff(m, Y, 2) == 0:
-        kv, sv = float(model.substitute(k)), float(model.substitute(s2))
-        if kv > 0 and sv > 0:
-            return math.sqrt(sv / (2 * kv))
+    kv, sv = model.linear_damping_constant(), model.constant_noise_intensity()
+    if kv is not None and sv is not None and kv > 0 and sv > 0:
+        return math.sqrt(sv / (2 * kv))
     return math.sqrt(2.0 * h_max)
 
 

@@ -76,26 +76,6 @@ class Diagnostics:
     self_excited: bool = False
 
 
-def _linear_damping_constant(model) -> float | None:
-    """c when eps*h = c*y with constant c, else None."""
-    from models import X, Y
-
-    h = sp.expand(model.substitute(model.epsilon * model.h))
-    c = sp.diff(h, Y)
-    if c.free_symbols & {X, Y} or sp.simplify(h - c * Y) != 0:
-        return None
-    return float(c)
-
-
-def _sigma2_constant(model) -> float | None:
-    from models import X, Y
-
-    s2 = model.substitute(model.diffusion_squared)
-    if s2.free_symbols & {X, Y}:
-        return None
-    return float(s2)
-
-
 def _check_averagable(model) -> None:
     """The energy-envelope methods need one confining single well and symmetric barriers."""
     model.check_single_well()
@@ -144,11 +124,7 @@ def cycle_quantities(model, H):
     T = orbit.integral(2.0)
     loss = np.zeros_like(H)
     if model.has_barriers:
-        above = H > Gd
-        v = np.where(above, np.sqrt(2.0 * np.maximum(H - Gd, 0.0)), 1.0)  # dummy speed where no impact
-        e1 = np.asarray(model.restitution.coefficient(v), dtype=float)
-        e2 = np.asarray(model.restitution.coefficient(e1 * v), dtype=float)
-        loss = np.where(above, (1.0 - e1**2 * e2**2) * (H - Gd), 0.0)
+        loss = np.asarray(model.restitution.two_impact_loss(np.maximum(H - Gd, 0.0)), dtype=float)
     return W, T, loss
 
 
@@ -159,8 +135,8 @@ def _reference_density(model, h_max, points=600):
     """
     H = np.linspace(h_max / points, h_max, points)
     W, T, _ = cycle_quantities(model, H)
-    c = _linear_damping_constant(model)
-    s2 = _sigma2_constant(model)
+    c = model.linear_damping_constant()
+    s2 = model.constant_noise_intensity()
     if c is not None and s2 is not None:
         if c <= 0 or s2 <= 0:
             raise NormalisationError(
@@ -205,8 +181,8 @@ def _choose_h_max(model, elastic: bool = True) -> float:
 
     From the density of the elastic model (``elastic=True``) or of the model itself by the paper's averaging.
     """
-    c = _linear_damping_constant(model)
-    s2 = _sigma2_constant(model)
+    c = model.linear_damping_constant()
+    s2 = model.constant_noise_intensity()
     if elastic and c is not None and s2 is not None and c > 0 and s2 > 0:
         return 14.0 * s2 / (2.0 * c)  # exp(-beta H) T(H): tail mass ~ e^-14 times a polynomial
     h_max = 4.0
@@ -249,8 +225,8 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     (True, 0.961)
     """
     _check_averagable(model)
-    c = _linear_damping_constant(model)
-    s2 = _sigma2_constant(model)
+    c = model.linear_damping_constant()
+    s2 = model.constant_noise_intensity()
     notes: list[str] = []
     law = model.restitution
     vc = float(law.elastic_below()) if model.has_barriers else math.inf

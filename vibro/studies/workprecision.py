@@ -61,9 +61,7 @@ class ElasticOracle:
     def for_model(cls, model) -> ElasticOracle:
         """The oracle for a model with linear damping and additive noise (its restitution law is ignored)."""
         from hybrid.errors import ModelError
-        from vibro.solve.diagnostics import _linear_damping_constant, _sigma2_constant
-
-        c, s2 = _linear_damping_constant(model), _sigma2_constant(model)
+        c, s2 = model.linear_damping_constant(), model.constant_noise_intensity()
         if c is None or s2 is None or not (c > 0 and s2 > 0):
             raise ModelError("the elastic closed form needs damping c*y with c > 0 and additive noise")
         return cls(lambda x: float(model.potential(np.array([x]))[0]), 2.0 * c / s2, model.barriers[1])
@@ -114,17 +112,11 @@ class ElasticOracle:
 
 
 def free_quasi_period(model, H: float) -> float:
-    """Time between two impacts at opposite barriers of the free orbit at energy H > G(delta): int dx / y.
+    """Time between two impacts at opposite barriers of the free orbit at energy H > G(delta), symmetric gap:
+    half the quasi-period T(H) of :func:`averaging.period` (the one implementation of periods)."""
+    from averaging import period
 
-    Quadrature with x = delta sin(theta) (smooth integrand; y > 0 at the barriers), independent of the orbit code.
-    """
-    d = model.barriers[1]
-
-    def f(th):
-        x = d * math.sin(th)
-        return d * math.cos(th) / math.sqrt(2.0 * H - 2.0 * float(model.potential(np.array([x]))[0]))
-
-    return integrate.quad(f, -0.5 * math.pi, 0.5 * math.pi, epsabs=0.0, epsrel=1e-13, limit=200)[0]
+    return 0.5 * float(period(model, float(H))[0])
 
 
 # ----------------------------------------------------------------------------- Monte Carlo
