@@ -48,8 +48,9 @@ class ImpactOscillator:
         The noise intensities D_kl (E[xi_k xi_l] = 2 D_kl delta). A scalar means D * identity.
     parameters : mapping
         Parameter names and default values. ``delta`` is the barrier distance when ``barriers='delta'``.
-    barriers : 'delta', a pair of expressions (left, right), or None
-        Barrier positions: symmetric at +-delta, asymmetric, or no barriers.
+    barriers : 'delta', a pair (left, right), or None
+        Barrier positions: symmetric at +-delta, asymmetric, one-sided (None on the side without a barrier, e.g.
+        ``(None, "delta")``), a stop at the equilibrium (``(0, None)``: motion on x >= 0), or no barriers.
     restitution : RestitutionLaw
     epsilon : expression
         The small parameter of eq. 1 (1 in the paper's examples).
@@ -112,8 +113,19 @@ class ImpactOscillator:
             d = real_symbol("delta")
             self.barrier_exprs = (-d, d)
         else:
-            left, right = barriers
-            self.barrier_exprs = (_as_expr(left, "left barrier"), _as_expr(right, "right barrier"))
+            try:
+                left, right = barriers
+            except (TypeError, ValueError) as exc:
+                raise ModelError(
+                    f"barriers={barriers!r}: use 'delta', None, or a pair (left, right) in which None means no "
+                    "barrier on that side, e.g. (0, None) for a stop at the equilibrium"
+                ) from exc
+            if left is None and right is None:
+                self.barrier_exprs = None
+            else:
+                # None on one side: no barrier there (a one-sided stop)
+                self.barrier_exprs = (-sp.oo if left is None else _as_expr(left, "left barrier"),
+                                      sp.oo if right is None else _as_expr(right, "right barrier"))
         self.restitution = restitution if restitution is not None else Elastic()
         if not isinstance(self.restitution, RestitutionLaw):
             raise ModelError(
@@ -165,9 +177,10 @@ class ImpactOscillator:
                 if b.free_symbols & {X, Y}:
                     raise ModelError("barrier positions may depend on parameters only")
             left, right = self.barriers
-            if not left < 0.0 < right:
+            if not (left <= 0.0 <= right and left < right):
                 raise ModelError(
-                    f"barriers must enclose the equilibrium x = 0: got left={left:g}, right={right:g}"
+                    f"barriers must enclose or touch the equilibrium x = 0 (left <= 0 <= right): got left={left:g}, "
+                    f"right={right:g}"
                 )
 
     def with_params(self, **values: float) -> ImpactOscillator:

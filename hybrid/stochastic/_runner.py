@@ -158,6 +158,11 @@ def _check_x0(model, x0) -> None:
     left, right = model.barriers
     if not (left <= x0[0] <= right):
         raise ParameterError(f"initial position x0={x0[0]:g} is outside the barriers [{left:g}, {right:g}]")
+    # on a wall the velocity must be zero or point into the gap (the impact has already happened)
+    if (x0[0] == right and x0[1] > 0) or (x0[0] == left and x0[1] < 0):
+        raise ParameterError(
+            f"x0={tuple(x0)!r} starts on a barrier moving outwards; give a velocity of 0 or one pointing into the gap"
+        )
 
 
 def default_chunk_paths(paths: int) -> int:
