@@ -137,7 +137,7 @@ class EnergyChain:
             after = method.jump_target(law, excess)
             moving = after < excess
             src, excess, after = src[moving], excess[moving], after[moving]
-            rate = 2.0 / table.period(grid[src])
+            rate = table.walls / table.period(grid[src])
             Hn = Gd + after
             j = np.clip(np.searchsorted(grid, Hn, side="right") - 1, 0, n - 2)
             theta = (Hn - grid[j]) / (grid[j + 1] - grid[j])
@@ -152,7 +152,7 @@ class EnergyChain:
         """1 + (mass above h_max) / W_top: the top node also stands for the tail it cuts off, so it jumps faster.
 
         A reflecting top would force d(p/p0)/dH = 0 at h_max and fatten the tail near it. Above h_max the jumps
-        leave locally at rate q = 2/T, so r = p/p0 decays like exp(-lam H) with
+        leave locally at rate q = walls/T, so r = p/p0 decays like exp(-lam H) with
         (sigma2_bar/2)(lam**2 - lam (ln kappa)') = q, kappa = sigma2_bar p0 / 2 (landings from above are neglected).
         """
         table, grid = self.table, self.grid
@@ -161,7 +161,7 @@ class EnergyChain:
         l1, l0 = table.log_density(np.array([h1, h0]), drift_method, self.law)
         dlogp0 = (l1 - l0) / (h1 - h0)
         a = (np.log(s1) - np.log(s0)) / (h1 - h0) + dlogp0
-        b = 2.0 * (2.0 / float(table.period(np.array([h1]))[0])) / s1
+        b = 2.0 * (table.walls / float(table.period(np.array([h1]))[0])) / s1
         lam_p = 0.5 * (a + np.sqrt(a * a + 4.0 * b)) - dlogp0
         if not (np.isfinite(lam_p) and lam_p > 0 and self.W[-1] > 0):
             return 1.0

@@ -29,8 +29,12 @@ class ImpactMethod:
     jumps = False
     description = ""
 
-    def loss(self, law, excess):
-        """Energy lost per quasi-period as a drift term, given ``excess`` = H - G(delta) >= 0 (array)."""
+    def loss(self, law, excess, walls: int = 2):
+        """Energy lost per quasi-period as a drift term, given ``excess`` = H - G(delta) >= 0 (array).
+
+        ``walls`` is the number of barriers a level above G(delta) hits per quasi-period: 2 for a symmetric gap,
+        1 for a one-sided stop (then every method's loss is the single impact's (1 - e**2) excess).
+        """
         return np.zeros_like(np.asarray(excess, dtype=float))
 
     def jump_target(self, law, excess):
@@ -59,7 +63,9 @@ class PaperMethod(ImpactMethod):
     name = "paper"
     description = "eq. 13: drift -(1 - e^4)(H - G(delta))/T"
 
-    def loss(self, law, excess):
+    def loss(self, law, excess, walls: int = 2):
+        if walls == 1:
+            return law.impact_loss(excess)
         return law.two_impact_loss(excess, reading="paper")
 
 
@@ -76,7 +82,9 @@ class ExactTwoImpactMethod(ImpactMethod):
     name = "exact-two-impact"
     description = "drift -(1 - e1^2 e2^2)(H - G(delta))/T, e2 = e(e1 v)"
 
-    def loss(self, law, excess):
+    def loss(self, law, excess, walls: int = 2):
+        if walls == 1:
+            return law.impact_loss(excess)
         return law.two_impact_loss(excess, reading="exact")
 
     def speed_breakpoints(self, law) -> list[float]:

@@ -40,8 +40,8 @@ class Geometry:
     --------
     >>> from models import DuffingImpact
     >>> geo = geometry(DuffingImpact())
-    >>> round(geo.G_delta, 12), geo.barriers
-    (0.55, (-1.0, 1.0))
+    >>> round(geo.G_delta, 12), geo.barriers, geo.walls
+    (0.55, (-1.0, 1.0), 2)
     """
 
     def __init__(self, model):
@@ -67,17 +67,23 @@ class Geometry:
             self._g = lambda x: np.asarray(gf(x, *vals), dtype=float) + 0.0 * np.asarray(x, dtype=float)
         self.barriers = tuple(float(b) for b in model.barriers)
         left, right = self.barriers
-        if np.isfinite(left) and np.isfinite(right):
-            gl, gr = self._G(np.array([left, right]))
-            if abs(gl - gr) > 1e-12 * max(1.0, abs(gl)):
-                model.barrier_energy  # noqa: B018 - raises the model's ModelError for asymmetric impact levels
-                raise ModelError("asymmetric impact levels")  # pragma: no cover
-            self.G_delta = float(gr)
-        elif np.isfinite(left) or np.isfinite(right):
-            model.barrier_energy  # noqa: B018 - one-sided barriers: the model explains why this is refused
-            raise ModelError("one-sided barriers are not supported by the averaging")  # pragma: no cover
-        else:
-            self.G_delta = float("inf")
+        finite = [b for b in (left, right) if np.isfinite(b)]
+        levels = [float(v) for v in self._G(np.array(finite))] if finite else []
+        # walls: how many barriers a level above G_delta hits per quasi-period (2 symmetric, 1 one-sided)
+        self.walls = len(levels)
+        if len(levels) == 2 and abs(levels[0] - levels[1]) > 1e-12 * max(1.0, abs(levels[0])):
+            raise ModelError(
+                f"G(left)={levels[0]:.6g} differs from G(right)={levels[1]:.6g}: the energy-envelope averaging "
+                "needs one impact level; use symmetric or one-sided barriers for averaging (Monte Carlo, orbits "
+                "and `vibro pdf --method fpk` accept asymmetric ones)"
+            )
+        self.G_delta = max(levels) if levels else float("inf")
+        if levels and self.G_delta <= 0.0:
+            raise ModelError(
+                "a barrier at the equilibrium (G = 0 there) is hit by every orbit at its highest speed: the "
+                "energy-envelope averaging has no impact-free range to start from here; use Monte Carlo "
+                "(vibro mc) or the phase-plane density solver"
+            )
         self.has_barriers = bool(np.isfinite(self.G_delta))
 
     def potential(self, x):

@@ -155,7 +155,8 @@ def averaged_coefficients(model, H, method="paper", nodes: int = DEFAULT_NODES) 
     T = o["T"]
     drift = o["drift"] / T
     diffusion = o["diffusion"] / T
-    Gd = geometry(model).G_delta
+    geo = geometry(model)
+    Gd = geo.G_delta
     excess = np.where(H > Gd, H - Gd, 0.0)
     law = model.restitution
     imp = H > Gd
@@ -164,10 +165,10 @@ def averaged_coefficients(model, H, method="paper", nodes: int = DEFAULT_NODES) 
     target = H.copy()
     if imp.any():
         if m.jumps:
-            rate[imp] = 2.0 / T[imp]
+            rate[imp] = geo.walls / T[imp]
             target[imp] = Gd + m.jump_target(law, excess[imp])
         else:
-            loss[imp] = m.loss(law, excess[imp])
+            loss[imp] = m.loss(law, excess[imp], geo.walls)
             drift = drift - loss / T
     return AveragedCoefficients(H, drift, diffusion, T, loss, rate, target, m.name)
 
@@ -206,7 +207,8 @@ class StationaryDensity:
         self.mean_x2 = float(np.sum(self._qp * table.mean_x2(qH)))
         self.prob_below_barrier = float(np.sum(self._qp[qH <= Gd])) if np.isfinite(Gd) else 1.0
         above = qH > Gd
-        self.impact_rate = float(np.sum(self._qp[above] * 2.0 / table.period(qH[above]))) if above.any() else 0.0
+        rate = table.walls / table.period(qH[above]) if above.any() else np.zeros(0)
+        self.impact_rate = float(np.sum(self._qp[above] * rate))
         self.total_mass = float(np.sum(self._qp))
         self.tail_density = float(self.p[-1])
 

@@ -136,6 +136,7 @@ class EnergyTable:
         self.h_max = float(h_max)
         self.nodes = nodes
         self.G_delta = geometry(model).G_delta
+        self.walls = geometry(model).walls
         self.H1 = min(self.G_delta, self.h_max)
         self._fit_low()
         self.has_impacts = self.h_max > self.G_delta
@@ -215,7 +216,7 @@ class EnergyTable:
         logB = self.high["logB"]
         for a, b in zip(edges[:-1], edges[1:]):
             def integrand(u):
-                return 4.0 * u * method.loss(law, u * u) * np.exp(-logB(u))
+                return 4.0 * u * method.loss(law, u * u, self.walls) * np.exp(-logB(u))
 
             F = Cheb.fit(integrand, a, b).antiderivative()
             pieces.append((a, b, total, F))

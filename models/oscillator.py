@@ -256,23 +256,33 @@ class ImpactOscillator:
 
     @property
     def barrier_energy(self) -> float:
-        """G(delta): the energy above which the oscillator hits the barriers (inf without barriers).
+        """G at the barriers: the energy above which the oscillator hits them (inf without barriers).
+
+        For a one-sided stop it is G at that stop (0 for a stop at the equilibrium).
 
         Raises
         ------
         ModelError
             When G(left) != G(right): the energy-envelope averaging needs one impact energy level.
+
+        Examples
+        --------
+        >>> m = ImpactOscillator("x", parameters={"D": 0.1, "delta": 2.0}, barriers=(None, "delta"))
+        >>> m.barrier_energy
+        2.0
         """
         if not self.has_barriers:
             return float("inf")
-        if not self.is_symmetric:
-            left, right = self.barriers
-            gl, gr = self.potential(np.array([left, right]))
+        left, right = self.barriers
+        finite = [b for b in (left, right) if np.isfinite(b)]
+        levels = [float(v) for v in self.potential(np.array(finite))]
+        if len(levels) == 2 and abs(levels[0] - levels[1]) > 1e-12 * max(1.0, abs(levels[0])):
             raise ModelError(
-                f"G(left)={gl:.6g} differs from G(right)={gr:.6g}: the energy-envelope averaging assumes one impact "
-                "level G(delta). Use symmetric barriers for averaging; Monte Carlo and orbits accept asymmetric ones"
+                f"G(left)={levels[0]:.6g} differs from G(right)={levels[1]:.6g}: the energy-envelope averaging assumes "
+                "one impact level G(delta). Use symmetric or one-sided barriers for averaging; Monte Carlo and orbits "
+                "accept asymmetric ones"
             )
-        return float(self.potential(np.array([self.barriers[1]]))[0])
+        return max(levels)
 
     # ------------------------------------------------------------------ energy
     @cached_property

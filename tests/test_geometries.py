@@ -86,3 +86,45 @@ def test_stop_at_the_equilibrium_tends_to_the_asymptotic_mean_energy(r):
     expected = D / (c + (4.0 / math.pi) * (1 - r) / (1 + r))
     est = st.mean_energy
     assert abs(est.value - expected) < 3.0 * est.ci + 0.01 * expected, (est, expected)
+
+
+# ----------------------------------------------------------------------------- averaging on a one-sided stop
+
+def one_sided_duffing(law, c=0.2, D=0.1, b=0.2, wall=0.5):
+    return ImpactOscillator("x + b*x**3", "c*y", parameters={"b": b, "c": c, "D": D, "w": wall},
+                            barriers=(None, "w"), restitution=law)
+
+
+@pytest.mark.parametrize("method", ["paper", "exact-two-impact", "jump"])
+def test_averaging_on_a_one_sided_elastic_stop_is_the_gibbs_density(method):
+    from scipy import integrate
+
+    from averaging import stationary_density
+
+    c, D, b, wall = 0.2, 0.1, 0.2, 0.5
+    sd = stationary_density(one_sided_duffing(Elastic(), c, D, b, wall), method=method, h_max=10.0)
+    G = lambda x: 0.5 * x * x + 0.25 * b * x**4  # noqa: E731
+    z = integrate.quad(lambda x: math.exp(-c * G(x) / D), -10.0, wall, epsabs=0, epsrel=1e-12)[0]
+    mean_G = integrate.quad(lambda x: G(x) * math.exp(-c * G(x) / D), -10.0, wall, epsabs=0, epsrel=1e-12)[0] / z
+    assert sd.mean_energy == pytest.approx(D / (2 * c) + mean_G, rel=1e-6)
+    # Rice: the wall flux of the Gibbs density, p_x(w) * E[y+] = p_x(w) * sqrt(D / (2 pi c))
+    rate = math.exp(-c * G(wall) / D) / z * math.sqrt(D / (2 * math.pi * c))
+    assert sd.impact_rate == pytest.approx(rate, rel=1e-6)
+
+
+def test_one_sided_stop_loses_one_impact_per_quasi_period():
+    from averaging import averaged_coefficients
+
+    m = one_sided_duffing(Newton(0.5))
+    H = np.array([m.barrier_energy + 0.4])
+    for method in ("paper", "exact-two-impact"):
+        assert averaged_coefficients(m, H, method).loss[0] == pytest.approx(0.75 * 0.4, rel=1e-12)
+    jump = averaged_coefficients(m, H, "jump")
+    assert jump.jump_rate[0] == pytest.approx(1.0 / jump.period[0], rel=1e-12)
+
+
+def test_averaging_refuses_a_stop_at_the_equilibrium_with_a_reason():
+    from averaging import stationary_density
+
+    with pytest.raises(ModelError, match="equilibrium"):
+        stationary_density(equilibrium_stop(0.8), method="jump", h_max=4.0)

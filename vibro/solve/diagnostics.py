@@ -124,7 +124,10 @@ def cycle_quantities(model, H):
     T = orbit.integral(2.0)
     loss = np.zeros_like(H)
     if model.has_barriers:
-        loss = np.asarray(model.restitution.two_impact_loss(np.maximum(H - Gd, 0.0)), dtype=float)
+        excess = np.maximum(H - Gd, 0.0)
+        one_wall = sum(bool(np.isfinite(b)) for b in model.barriers) == 1
+        law = model.restitution
+        loss = np.asarray(law.impact_loss(excess) if one_wall else law.two_impact_loss(excess), dtype=float)
     return W, T, loss
 
 
