@@ -78,7 +78,7 @@ class Geometry:
                 "and `vibro pdf --method fpk` accept asymmetric ones)"
             )
         self.G_delta = max(levels) if levels else float("inf")
-        if levels and self.G_delta <= 0.0:
+        if any(b == 0.0 for b in finite):
             raise ModelError(
                 "a barrier at the equilibrium (G = 0 there) is hit by every orbit at its highest speed: the "
                 "energy-envelope averaging has no impact-free range to start from here; use Monte Carlo "

@@ -106,28 +106,18 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     reasons = []
     elastic_enough = diag.elastic_law or diag.tail_impact_speed < tol / 10.0
     preds["exact"] = predict_averaging_error("exact", diag) if elastic_enough else math.inf
-    heavy = diag.r_damp_p90 > MAX_DAMPING_RATIO or diag.r_imp_p90 > MAX_IMPACT_RATIO
-    outside = diag.self_excited
+    refusal = averaging_refusal(diag)
     for name in ("paper", "jump"):
-        preds[name] = math.inf if (heavy or outside) else predict_averaging_error(name, diag)
+        preds[name] = math.inf if refusal else predict_averaging_error(name, diag)
     if preds["exact"] <= tol:
         why = ("impacts are elastic" if diag.elastic_law else
                f"impacts faster than V_C={diag.elastic_below:g} are rare: P(|v| > V_C) = "
                f"{diag.tail_impact_speed:.2g} < tol/10 under the elastic density")
         return Choice("exact", why + "; linear damping and additive noise make p(H) ~ T(H) exp(-beta H) exact",
                       preds["exact"], averaging_cost(), {}, preds, diag)
-    if outside and not heavy:
-        reasons.append(
-            "averaging not trusted: the damping feeds energy in somewhere (self-excited, e.g. van der Pol), outside "
-            "the dissipative models on which the averaging error model was calibrated"
-        )
-    elif heavy:
-        reasons.append(
-            f"averaging refused: the 90th-percentile energy loses {diag.r_damp_p90:.2f} of H per cycle to damping "
-            f"(limit {MAX_DAMPING_RATIO}) and {diag.r_imp_p90:.2f} to impacts (limit {MAX_IMPACT_RATIO}), "
-            "so the system is not quasi-conservative"
-        )
-    if not (heavy or outside):
+    if refusal:
+        reasons.append(refusal)
+    if not refusal:
         for name in ("paper", "jump"):  # cheapest first
             if preds[name] <= tol:
                 why = (f"energy lost per cycle is small (impacts {diag.r_imp:.3f} H, damping {diag.r_damp:.3f} H "
@@ -140,6 +130,31 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
             f"jump {preds['jump']:.3f})"
         )
     return mc_choice(model, tol, diag, "; ".join(reasons), preds, max_cost, mc_pilot, seed)
+
+
+def averaging_refusal(diag: Diagnostics) -> str | None:
+    """Why energy-envelope averaging must not be trusted for this model, or None when it may be.
+
+    The one rule behind ``choose`` and ``vibro pdf``: refused when the 90th-percentile energy loses more than
+    ``MAX_DAMPING_RATIO`` of H per cycle to damping or ``MAX_IMPACT_RATIO`` to impacts (not quasi-conservative), or
+    when the damping feeds energy in somewhere (self-excited, outside the calibrated domain).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> averaging_refusal(diagnose(DuffingImpact())) is None
+    True
+    >>> "self-excited" in averaging_refusal(diagnose(DuffingImpact().with_params(c=-0.1)))
+    True
+    """
+    if diag.r_damp_p90 > MAX_DAMPING_RATIO or diag.r_imp_p90 > MAX_IMPACT_RATIO:
+        return (f"averaging refused: the 90th-percentile energy loses {diag.r_damp_p90:.2f} of H per cycle to damping "
+                f"(limit {MAX_DAMPING_RATIO}) and {diag.r_imp_p90:.2f} to impacts (limit {MAX_IMPACT_RATIO}), "
+                "so the system is not quasi-conservative")
+    if diag.self_excited:
+        return ("averaging not trusted: the damping feeds energy in somewhere (self-excited, e.g. van der Pol or "
+                "negative damping), outside the dissipative models on which the averaging error model was calibrated")
+    return None
 
 
 def averaging_cost() -> float:

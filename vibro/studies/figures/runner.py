@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import inspect
 import json
-import platform
-import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.errors import ParameterError
+from vibro.provenance import versions
 from vibro.solve.metrics import bin_average, halves_noise_l1, joint_bin_average, l1_joint, l1_on_bins
 
 from .mcdata import JOINT_GRID, mass_outside, mc_h_density, mc_xy_density, xy_outside, xy_range  # noqa: F401 (xy_range re-exported)
@@ -335,29 +334,6 @@ def curve_rows(spec: FigureSpec, results: list[CaseResult]):
         if c not in table:
             table[c] = np.nan
     return table[cols]
-
-
-def versions() -> dict:
-    """Versions of Python, the scientific stack and this package (and the git commit when available)."""
-    out = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in ("numpy", "scipy", "sympy", "numba", "matplotlib", "pandas"):
-        try:
-            out[name] = __import__(name).__version__
-        except Exception:  # a missing optional package is not an error here
-            out[name] = None
-    try:
-        from importlib.metadata import version
-
-        out["vibro-impact"] = version("vibro-impact")
-    except Exception:
-        out["vibro-impact"] = None
-    try:
-        here = Path(__file__).resolve().parent
-        out["git_commit"] = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True,
-                                           timeout=5).stdout.strip() or None
-    except Exception:
-        out["git_commit"] = None
-    return out
 
 
 def output_names(number: int) -> dict:

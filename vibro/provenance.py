@@ -1,0 +1,119 @@
+"""How a result was made: the record written beside every output of the command line and of the studies.
+
+A sidecar ``FILE.json`` next to ``FILE.csv`` holds the command line, the model (expressions, parameters at full
+precision, restitution law), the method or scheme and its settings, seeds and chunking, package versions, the git
+commit and the wall time. Writing goes through :mod:`hybrid.io`, so a sidecar is never left half written.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PROVENANCE_VERSION = 1
+
+
+def versions() -> dict:
+    """Versions of Python, the scientific stack and this package (and the git commit when available).
+
+    Examples
+    --------
+    >>> sorted(k for k in versions() if k in ("numpy", "python"))
+    ['numpy', 'python']
+    """
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("numpy", "scipy", "sympy", "numba", "heyoka", "matplotlib", "pandas"):
+        module = sys.modules.get(name)
+        if module is None:  # report only what this run used: importing more would cost start-up time
+            out[name] = None
+            continue
+        out[name] = getattr(module, "__version__", None)
+    from vibro import __version__
+
+    out["vibro-impact"] = __version__
+    try:
+        here = Path(__file__).resolve().parent
+        out["git_commit"] = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True,
+                                           timeout=5).stdout.strip() or None
+    except Exception:  # not a git checkout, or no git: the version above still identifies the code
+        out["git_commit"] = None
+    return out
+
+
+def _jsonable(value):
+    """Numbers at full precision (repr), non-finite floats as strings, containers recursively."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if hasattr(value, "item") and callable(value.item) and getattr(value, "ndim", 1) == 0:
+        value = value.item()  # numpy scalar
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    return str(value)
+
+
+def record(kind: str, *, model=None, settings: dict | None = None, results: dict | None = None,
+           started: float | None = None, argv: list[str] | None = None) -> dict:
+    """The provenance record of one output.
+
+    Parameters
+    ----------
+    kind : str
+        What was computed: ``pdf``, ``mc``, ``solve``, ``orbit``, ...
+    model : ImpactOscillator, optional
+        Its ``describe()`` is stored (expressions, parameters, restitution law).
+    settings : dict, optional
+        Method or scheme and every setting that changes the numbers (dt, seed, chunk size, grid, ...).
+    results : dict, optional
+        Summary numbers of the output (mean energy and its CI, counts, ...).
+    started : float, optional
+        ``time.perf_counter()`` at the start; the wall time is measured from it.
+    argv : list of str, optional
+        The command line (default: ``sys.argv``).
+
+    Examples
+    --------
+    >>> r = record("pdf", settings={"method": "jump", "h_max": 4.0})
+    >>> r["kind"], r["settings"]["method"], "versions" in r
+    ('pdf', 'jump', True)
+    """
+    out = {
+        "provenance_version": PROVENANCE_VERSION,
+        "kind": kind,
+        "command": list(sys.argv if argv is None else argv),
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "model": model.describe() if model is not None else None,
+        "settings": settings or {},
+        "results": results or {},
+        "wall_time_s": None if started is None else time.perf_counter() - started,
+        "versions": versions(),
+    }
+    return _jsonable(out)
+
+
+def sidecar_path(output) -> Path:
+    """``FILE.json`` beside ``FILE.csv`` (or ``FILE.png``).
+
+    Examples
+    --------
+    >>> sidecar_path("out/p.csv").as_posix()
+    'out/p.json'
+    """
+    return Path(output).with_suffix(".json")
+
+
+def write_sidecar(output, rec: dict) -> Path:
+    """Write ``rec`` as JSON beside ``output`` (atomically); return the sidecar's path."""
+    from hybrid.io import atomic_write_text
+
+    path = sidecar_path(output)
+    atomic_write_text(path, json.dumps(rec, indent=2, sort_keys=False) + "\n")
+    return path
