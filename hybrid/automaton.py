@@ -65,8 +65,10 @@ class Mode:
         Mode name, unique within the automaton.
     flow : sequence of sympy expressions
         Time derivative of each state variable, in the automaton's state order.
-    noise : sequence of sympy expressions, optional
-        Coefficient of a scalar Itô white noise dB/dt on each state variable (zero where absent).
+    noise : sequence, optional
+        Per state variable, the coefficient of one white noise (a sequence of expressions), or a row of
+        coefficients of m independent white noises (a sequence of m-tuples: the n x m noise matrix). Zero where
+        absent. ``hybrid.stochastic.simulate_automaton`` reads it as Stratonovich (physical) noise by default.
 
     Examples
     --------
@@ -83,9 +85,12 @@ class Mode:
     def __post_init__(self):
         object.__setattr__(self, "flow", tuple(_as_expr(f, f"flow of mode {self.name!r}") for f in self.flow))
         if self.noise is not None:
-            object.__setattr__(
-                self, "noise", tuple(_as_expr(f, f"noise of mode {self.name!r}") for f in self.noise)
-            )
+            def entry(f):
+                if isinstance(f, (tuple, list)):
+                    return tuple(_as_expr(v, f"noise of mode {self.name!r}") for v in f)
+                return _as_expr(f, f"noise of mode {self.name!r}")
+
+            object.__setattr__(self, "noise", tuple(entry(f) for f in self.noise))
 
 
 @dataclass(frozen=True)
@@ -221,7 +226,9 @@ class HybridAutomaton:
             raise ModelError(f"duplicate mode names: {mode_names}")
         if self.initial_mode not in mode_names:
             raise ModelError(f"initial mode {self.initial_mode!r} is not one of {mode_names}")
-        known = set(names) | set(self.parameters)
+        if "t" in names or "t" in self.parameters:
+            raise ModelError("the name 't' is reserved for time; rename that state or parameter")
+        known = set(names) | set(self.parameters) | {"t"}  # t: time, for forcing and moving barriers
         n = len(self.states)
 
         def check(expr: sp.Expr, where: str) -> None:
@@ -241,7 +248,8 @@ class HybridAutomaton:
                 if len(m.noise) != n:
                     raise ModelError(f"mode {m.name!r} has {len(m.noise)} noise components for {n} states")
                 for f in m.noise:
-                    check(f, f"noise of mode {m.name!r}")
+                    for v in (f if isinstance(f, tuple) else (f,)):
+                        check(v, f"noise of mode {m.name!r}")
         tnames = [t.name for t in self.transitions]
         if len(set(tnames)) != len(tnames):
             raise ModelError(f"duplicate transition names: {tnames}")

@@ -27,3 +27,7 @@ class NormalisationError(VibroError):
 
 class StepSizeError(VibroError):
     """A time step is so large that a path could jump across the gap between the barriers."""
+
+
+class VibroWarning(UserWarning):
+    """Base class of the framework's warnings: a result that holds but carries a stated caveat."""

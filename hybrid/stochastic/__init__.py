@@ -52,3 +52,8 @@ __all__ = [
     "default_chunk_paths", "drive_paths", "generate_source", "get_scheme", "normals", "ratio_estimate",
     "sample_paths", "simulate_ensemble", "speed_scale", "ziggurat_tables",
 ]
+
+# Monte Carlo of any hybrid automaton with noise (n states, modes, guards, resets)
+from ._auto_runner import AUTOMATON_SCHEMES, AutomatonEnsemble, simulate_automaton  # noqa: E402
+
+__all__ += ["AUTOMATON_SCHEMES", "AutomatonEnsemble", "simulate_automaton"]

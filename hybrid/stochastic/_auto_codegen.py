@@ -1,0 +1,514 @@
+"""Numba source for Monte Carlo of any :class:`~hybrid.automaton.HybridAutomaton` with noise.
+
+The automaton's sympy expressions (Itô drift, noise matrix, guards, resets, observables, the guards' rates of
+change along the drift) become small ``inline`` numba functions of ``(x, t, p)``; one generic kernel calls them
+through if-chains on the mode index. Parameter values are not in the source (they arrive as the array ``p``), so
+changing a parameter never recompiles. The source is cached on disk by its hash, like the oscillator kernels.
+
+Time ``t`` may appear in flows, noise, guards and resets (forcing, moving barriers).
+
+Crossings are located on the step's own interpolant: for ``em`` and ``milstein`` the straight segment from the
+state before to the state after the step; for ``splitting`` the free flight of the positions at constant velocity,
+which *is* the scheme's position update, so the location is exact for guards of the positions. A root is
+bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative tolerance of
+1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at most
+``MAX_EVENTS`` of them; the excess is counted and reported.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import textwrap
+from dataclasses import dataclass
+
+import sympy as sp
+
+from hybrid.automaton import real_symbol
+from hybrid.errors import ModelError
+
+from ._codegen import _Printer
+
+TEMPLATE_VERSION = "1"
+MAX_EVENTS = 64
+"""Events handled within one time step; more are counted as ``event_overflow`` (chattering or Zeno)."""
+TIME = real_symbol("t")
+
+
+@dataclass(frozen=True)
+class AutomatonStructure:
+    """What the generator derived from an automaton: Itô drift, noise matrix, positions and velocities.
+
+    Attributes
+    ----------
+    states : tuple of str
+    params : tuple of str
+    modes : tuple of str
+    drift : tuple of tuple of sympy expressions
+        Itô drift per mode (Wong-Zakai corrected when the noise is Stratonovich).
+    noise : tuple of sympy Matrix
+        n x m noise matrix per mode (independent standard white noises).
+    transitions : tuple
+        The automaton's transitions, sorted by (source mode, priority).
+    pairs : tuple of (int, int)
+        (position index, velocity index) pairs with d position / dt = velocity in every mode.
+    """
+
+    states: tuple
+    params: tuple
+    modes: tuple
+    drift: tuple
+    noise: tuple
+    transitions: tuple
+    pairs: tuple
+    n_noise: int
+
+
+def noise_matrix(mode, n: int) -> sp.Matrix:
+    """The n x m noise matrix of ``mode``: its ``noise`` as a column (one noise) or as rows of m entries."""
+    if mode.noise is None:
+        return sp.zeros(n, 1)
+    rows = [list(r) if isinstance(r, (tuple, list)) else [r] for r in mode.noise]
+    widths = {len(r) for r in rows}
+    if len(rows) != n or len(widths) != 1:
+        raise ModelError(f"mode {mode.name!r}: the noise must be {n} rows of equally many entries (one per noise)")
+    return sp.Matrix(rows)
+
+
+def analyse(automaton, convention: str = "stratonovich") -> AutomatonStructure:
+    """Derive the Itô drift and the structure the schemes need.
+
+    Parameters
+    ----------
+    automaton : HybridAutomaton
+    convention : {'stratonovich', 'ito'}
+        How the noise in the modes is meant. Physical white noise is the Stratonovich limit; its Itô drift gains
+        the Wong-Zakai term 1/2 sum_k sum_j G_jk dG_ik/dx_j.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> from hybrid import HybridAutomaton, Mode
+    >>> x, v = sp.symbols("x v")
+    >>> A = HybridAutomaton((x, v), {"c": 0.1, "s": 0.3}, [Mode("m", (v, -x - sp.Symbol("c") * v), (0, "s*x"))])
+    >>> analyse(A).pairs
+    ((0, 1),)
+    """
+    if convention not in ("stratonovich", "ito"):
+        raise ModelError(f"convention={convention!r}: use 'stratonovich' (physical white noise) or 'ito'")
+    xs = automaton.states
+    n = len(xs)
+    drifts, noises, widths = [], [], set()
+    for mode in automaton.modes:
+        G = noise_matrix(mode, n)
+        widths.add(G.shape[1])
+        f = [sp.sympify(e) for e in mode.flow]
+        if convention == "stratonovich":
+            f = [f[i] + sp.Rational(1, 2) * sum(G[j, k] * sp.diff(G[i, k], xs[j])
+                                                for k in range(G.shape[1]) for j in range(n)) for i in range(n)]
+        drifts.append(tuple(sp.expand(e) for e in f))
+        noises.append(G)
+    if len(widths) != 1:
+        raise ModelError(f"every mode must have the same number of noises, got {sorted(widths)}")
+    m = widths.pop()
+    pairs = []
+    for i in range(n):
+        flows = {sp.sympify(mode.flow[i]) for mode in automaton.modes}
+        if len(flows) == 1:
+            (fq,) = flows
+            if fq in xs and all(noises[k][i, :].is_zero_matrix for k in range(len(noises))):
+                pairs.append((i, xs.index(fq)))
+    order = {mode.name: k for k, mode in enumerate(automaton.modes)}
+    trans = tuple(sorted(automaton.transitions, key=lambda t: (order[t.source], t.priority)))
+    return AutomatonStructure(
+        states=tuple(s.name for s in xs), params=tuple(automaton.parameters), modes=tuple(order),
+        drift=tuple(drifts), noise=tuple(noises), transitions=trans, pairs=tuple(pairs), n_noise=m,
+    )
+
+
+class _Names:
+    """sympy symbols -> code names: states x[i], parameters p[j], time t."""
+
+    def __init__(self, st: AutomatonStructure):
+        self.subs = {real_symbol(s): sp.Symbol(f"_x{i}") for i, s in enumerate(st.states)}
+        self.subs.update({real_symbol(s): sp.Symbol(f"_p{j}") for j, s in enumerate(st.params)})
+        self.subs[TIME] = sp.Symbol("t")
+        self.printer = _Printer({"standard": "python3"})
+        self.n, self.np = len(st.states), len(st.params)
+
+    def unpack(self) -> list[str]:
+        return [f"_x{i} = x[{i}]" for i in range(self.n)] + [f"_p{j} = p[{j}]" for j in range(self.np)]
+
+    def function(self, name: str, outputs: list, target: str | None) -> str:
+        """An inline numba function ``name(x, t, p[, out])`` computing ``outputs`` (common sub-expressions once)."""
+        exprs = [sp.sympify(e).xreplace(self.subs) for e in outputs]
+        reps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
+        body = self.unpack()
+        body += [f"{s} = {self.printer.doprint(e)}" for s, e in reps]
+        if target is None:
+            body.append(f"return {self.printer.doprint(reduced[0])}")
+            sig = f"def {name}(x, t, p):"
+        else:
+            body += [f"{target}[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
+            sig = f"def {name}(x, t, p, {target}):"
+        return "@nb.njit(inline='always')\n" + sig + "\n" + textwrap.indent("\n".join(body), "    ") + "\n"
+
+
+def _dispatch(name: str, count: int, call: str, indent: int) -> str:
+    """An if-chain calling ``{name}{k}`` with ``call`` for the index ``k``."""
+    lines = []
+    for k in range(count):
+        lines.append(f"{'if' if k == 0 else 'elif'} _which == {k}:")
+        lines.append(f"    {call.format(f=f'{name}{k}')}")
+    return textwrap.indent("\n".join(lines), " " * indent) if lines else " " * indent + "pass"
+
+
+def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
+                    cache: bool = True) -> tuple[str, AutomatonStructure]:
+    """The numba module source of ``scheme`` for ``automaton`` and the structure it was derived from.
+
+    ``observables`` maps names to sympy expressions of the states, parameters and ``t``.
+    """
+    st = analyse(automaton, convention)
+    names = _Names(st)
+    n, m = len(st.states), st.n_noise
+    funcs = []
+    for k, f in enumerate(st.drift):
+        funcs.append(names.function(f"_drift{k}", list(f), "out"))
+    for k, G in enumerate(st.noise):
+        funcs.append(names.function(f"_noise{k}", list(G), "out"))  # row-major n x m
+        if scheme == "milstein":
+            # L^j G_ik = sum_l G_lj dG_ik/dx_l, stored as [i, j, k] (row-major n x m x m)
+            xs = [real_symbol(s) for s in st.states]
+            lg = [sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
+                  for i in range(n) for j in range(m) for kk in range(m)]
+            funcs.append(names.function(f"_lgn{k}", lg, "out"))
+    for j, tr in enumerate(st.transitions):
+        funcs.append(names.function(f"_guard{j}", [tr.guard], None))
+        if not tr.symbolic_reset:
+            raise ModelError(
+                f"transition {tr.name!r}: the Monte Carlo kernel needs a symbolic reset (a tuple of expressions); "
+                "callable resets run in the orbit backends only"
+            )
+        funcs.append(names.function(f"_reset{j}", list(tr.reset), "out"))
+        # rate of change of the guard along the drift: the impact speed for a wall guard x - w
+        src_mode = st.modes.index(tr.source)
+        xs = [real_symbol(s) for s in st.states]
+        rate = sum(sp.diff(tr.guard, xs[i]) * st.drift[src_mode][i] for i in range(n)) + sp.diff(tr.guard, TIME)
+        funcs.append(names.function(f"_grate{j}", [rate], None))
+    obs = list(observables.values())
+    funcs.append(names.function("_observe", obs if obs else [sp.Integer(0)], "out"))
+    # per mode: the transitions leaving it (indices into st.transitions), in priority order
+    leaving = [[j for j, tr in enumerate(st.transitions) if tr.source == mode] for mode in st.modes]
+    first = [min(ix) if ix else 0 for ix in leaving]
+    count = [len(ix) for ix in leaving]
+    targets = [st.modes.index(tr.target) for tr in st.transitions]
+    directions = [int(tr.direction) for tr in st.transitions]
+    self_loops = [int(tr.source == tr.target) for tr in st.transitions]
+    positions = [q for q, _ in st.pairs]
+    velocity_of = {q: v for q, v in st.pairs}
+    src = _TEMPLATE.format(
+        version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
+        n_modes=len(st.modes), n_trans=len(st.transitions), max_events=MAX_EVENTS,
+        funcs="\n\n".join(funcs),
+        first=tuple(first) + (0,), count=tuple(count) + (0,), targets=tuple(targets) + (0,),
+        directions=tuple(directions) + (0,), self_loops=tuple(self_loops) + (0,),
+        drift_call=_dispatch("_drift", len(st.modes), "{f}(x, t, p, out)", 4),
+        noise_call=_dispatch("_noise", len(st.modes), "{f}(x, t, p, out)", 4),
+        lgn_call=(_dispatch("_lgn", len(st.modes), "{f}(x, t, p, out)", 4) if scheme == "milstein"
+                  else "    pass"),
+        guard_call=_dispatch("_guard", len(st.transitions), "return {f}(x, t, p)", 4),
+        reset_call=_dispatch("_reset", len(st.transitions), "{f}(x, t, p, out)", 4),
+        grate_call=_dispatch("_grate", len(st.transitions), "return {f}(x, t, p)", 4),
+        positions=tuple(positions) + (0,), n_pos=len(positions),
+        velocities=tuple(velocity_of[q] for q in positions) + (0,),
+    )
+    return src, st
+
+
+def source_hash(src: str) -> str:
+    """Short hash of a generated source (the cache key, with the numba and numpy versions)."""
+    import numba as nb
+    import numpy as np
+
+    return hashlib.sha256((src + nb.__version__ + np.__version__).encode()).hexdigest()[:16]
+
+
+_TEMPLATE = '''\
+"""Generated by hybrid.stochastic._auto_codegen (template {version}), scheme {scheme}. Do not edit."""
+import math
+
+import numba as nb
+import numpy as np
+
+from hybrid.stochastic._rng import next_normal
+
+CACHE = {cache}
+N = {n}
+M = {m}
+N_OBS = {n_obs}
+N_TRANS = {n_trans}
+MAX_EVENTS = {max_events}
+FIRST = np.array({first}, dtype=np.int64)
+COUNT = np.array({count}, dtype=np.int64)
+TARGET = np.array({targets}, dtype=np.int64)
+DIRECTION = np.array({directions}, dtype=np.int64)
+SELF_LOOP = np.array({self_loops}, dtype=np.int64)
+POS = np.array({positions}, dtype=np.int64)
+VEL = np.array({velocities}, dtype=np.int64)
+N_POS = {n_pos}
+
+
+{funcs}
+
+
+@nb.njit(inline='always')
+def drift(_which, x, t, p, out):
+{drift_call}
+
+
+@nb.njit(inline='always')
+def noise(_which, x, t, p, out):
+{noise_call}
+
+
+@nb.njit(inline='always')
+def lgn(_which, x, t, p, out):
+{lgn_call}
+
+
+@nb.njit(inline='always')
+def guard(_which, x, t, p):
+{guard_call}
+    return 0.0
+
+
+@nb.njit(inline='always')
+def reset(_which, x, t, p, out):
+{reset_call}
+
+
+@nb.njit(inline='always')
+def grate(_which, x, t, p):
+{grate_call}
+    return 0.0
+
+
+@nb.njit(inline='always')
+def crosses(d, g0, g1):
+    # a state just reset onto the guard (g0 = 0) fires again only if the step carries it strictly beyond (with
+    # Euler-Maruyama the velocity on the segment need not match the motion of the positions)
+    if d >= 0 and ((g0 < 0.0 and g1 >= 0.0) or (g0 == 0.0 and g1 > 0.0)):
+        return True
+    if d <= 0 and ((g0 > 0.0 and g1 <= 0.0) or (g0 == 0.0 and g1 < 0.0)):
+        return True
+    return False
+
+
+@nb.njit(inline='always')
+def interpolate(xa, va, xb, s, dt, free_flight, xs):
+    # the step's interpolant at fraction s: the free flight of the positions at the velocities va (splitting), or
+    # the straight segment from xa to xb
+    if free_flight:
+        for i in range(N):
+            xs[i] = xa[i]
+        for k in range(N_POS):
+            xs[POS[k]] = xa[POS[k]] + s * dt * va[VEL[k]]
+    else:
+        for i in range(N):
+            xs[i] = xa[i] + s * (xb[i] - xa[i])
+
+
+@nb.njit(inline='always')
+def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
+    # Illinois regula falsi for the guard on the interpolant, bracketed on [0, 1]; returns s
+    if g0 == 0.0:  # already on the guard (just reset there) and carried beyond: fires at once
+        interpolate(xa, va, xb, 0.0, dt, free_flight, xs)
+        return 0.0
+    a, b = 0.0, 1.0
+    fa, fb = g0, g1
+    side = 0
+    s = 1.0
+    fs = g1
+    for _ in range(100):
+        s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
+        if not (s > a and s < b):
+            s = 0.5 * (a + b)
+        interpolate(xa, va, xb, s, dt, free_flight, xs)
+        fs = guard(j, xs, t0 + s * dt, p)
+        if fs == 0.0 or (b - a) < 1e-13:
+            break
+        if (fs < 0.0) == (fa < 0.0):
+            a, fa = s, fs
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = s, fs
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    # the state at s must not be beyond the guard: take the bracket end on the side it came from
+    if (fs < 0.0) != (g0 < 0.0) and fs != 0.0:
+        s = a
+        interpolate(xa, va, xb, s, dt, free_flight, xs)
+    return s
+
+
+@nb.njit(nogil=True, cache=CACHE)
+def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf, scheme,
+              obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
+              v_scale, v_bins, vhist, counts, sums, sumsq, events):
+    """Paths of one chunk; histograms (with underflow bin 0 and overflow bin last), sums and event counts.
+
+    ``scheme``: 0 Euler-Maruyama, 1 Milstein (commutative noise), 2 splitting (kick, free flight, noise, kick).
+    counts: [samples, event_overflow, outside, nonfinite, joint_outside]; events[j]: firings of transition j
+    after burn-in; vhist[j]: |rate of change of guard j| at its firings, overflow in the last bin.
+    """
+    s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
+    sdt = math.sqrt(dt)
+    x = np.empty(N)
+    xa = np.empty(N)
+    va = np.empty(N)
+    xb = np.empty(N)
+    xs = np.empty(N)
+    xr = np.empty(N)
+    f = np.empty(N)
+    G = np.empty(N * M)
+    L = np.empty(N * M * M)
+    dw = np.empty(M)
+    ob = np.empty(N_OBS)
+    free_flight = scheme == 2
+    for _path in range(npaths):
+        for i in range(N):
+            x[i] = x0[i]
+        mode = mode0
+        t = t0
+        cs = 0
+        for step in range(n_burn + n_samp * stride):
+            rec = step >= n_burn
+            for k in range(M):
+                z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)
+                dw[k] = sdt * z
+            frac = 1.0  # share of the step still to run
+            if free_flight:
+                # kick: velocities by half the drift
+                drift(mode, x, t, p, f)
+                for k in range(N_POS):
+                    x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+            n_ev = 0
+            while True:
+                tau = frac * dt
+                for i in range(N):
+                    xa[i] = x[i]
+                    va[i] = x[i]
+                if free_flight:
+                    for i in range(N):
+                        xb[i] = xa[i]
+                    for k in range(N_POS):
+                        xb[POS[k]] = xa[POS[k]] + tau * xa[VEL[k]]
+                else:
+                    drift(mode, xa, t, p, f)
+                    noise(mode, xa, t, p, G)
+                    for i in range(N):
+                        acc = f[i] * tau
+                        for k in range(M):
+                            acc += G[i * M + k] * dw[k] * frac
+                        xb[i] = xa[i] + acc
+                    if scheme == 1:
+                        lgn(mode, xa, t, p, L)
+                        for i in range(N):
+                            acc = 0.0
+                            for jn in range(M):
+                                for k in range(M):
+                                    prod = dw[jn] * dw[k] * frac * frac
+                                    if jn == k:
+                                        prod -= tau
+                                    acc += L[(i * M + jn) * M + k] * prod
+                            xb[i] += 0.5 * acc
+                # earliest crossing among the transitions leaving this mode
+                best = -1
+                best_s = 2.0
+                for jj in range(COUNT[mode]):
+                    j = FIRST[mode] + jj
+                    g0 = guard(j, xa, t, p)
+                    g1 = guard(j, xb, t + tau, p)
+                    if crosses(DIRECTION[j], g0, g1):
+                        sj = locate(j, xa, va, xb, t, tau, p, free_flight, g0, g1, xs)
+                        if sj < best_s:
+                            best_s = sj
+                            best = j
+                if best < 0:
+                    for i in range(N):
+                        x[i] = xb[i]
+                    t += tau
+                    break
+                interpolate(xa, va, xb, best_s, tau, free_flight, xs)
+                if rec:
+                    events[best] += 1
+                    vb = abs(grate(best, xs, t + best_s * tau, p)) * v_scale
+                    if vb < v_bins:
+                        vhist[best, int(vb)] += 1
+                    else:
+                        vhist[best, v_bins] += 1
+                reset(best, xs, t + best_s * tau, p, xr)
+                for i in range(N):
+                    x[i] = xr[i]
+                mode = TARGET[best]
+                t += best_s * tau
+                frac *= 1.0 - best_s
+                n_ev += 1
+                if n_ev >= MAX_EVENTS:
+                    # chattering or Zeno inside one step: stop resolving it, keep the state, count it
+                    if rec:
+                        counts[1] += 1
+                    t += frac * dt
+                    break
+            if free_flight:
+                noise(mode, x, t, p, G)
+                for i in range(N):
+                    acc = 0.0
+                    for k in range(M):
+                        acc += G[i * M + k] * dw[k]
+                    x[i] += acc
+                drift(mode, x, t, p, f)
+                for k in range(N_POS):
+                    x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+            if not rec:
+                continue
+            cs += 1
+            if cs < stride:
+                continue
+            cs = 0
+            counts[0] += 1
+            # the admissible set: no self-loop guard of this mode may be beyond its firing side
+            for jj in range(COUNT[mode]):
+                j = FIRST[mode] + jj
+                if SELF_LOOP[j] == 1:
+                    gj = guard(j, x, t, p)
+                    if (DIRECTION[j] > 0 and gj > 1e-9) or (DIRECTION[j] < 0 and gj < -1e-9):
+                        counts[2] += 1
+                        break
+            _observe(x, t, p, ob)
+            for o in range(N_OBS):
+                v = ob[o]
+                if v != v:
+                    counts[3] += 1
+                    continue
+                sums[o] += v
+                sumsq[o] += v * v
+                b = (v - obs_lo[o]) * obs_scale[o]
+                if b < 0.0:
+                    hist[o, 0] += 1
+                elif b >= obs_bins[o]:
+                    hist[o, obs_bins[o] + 1] += 1
+                else:
+                    hist[o, int(b) + 1] += 1
+            if jx >= 0:
+                bx = (ob[jx] - j_lo[0]) * j_scale[0]
+                by = (ob[jy] - j_lo[1]) * j_scale[1]
+                if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
+                    jhist[int(by), int(bx)] += 1
+                else:
+                    counts[4] += 1
+    state[0], state[1], state[2], state[3] = s0, s1, s2, s3
+'''
