@@ -27,3 +27,11 @@ class NormalisationError(VibroError):
 
 class StepSizeError(VibroError):
     """A time step is so large that a path could jump across the gap between the barriers."""
+
+
+class VibroWarning(UserWarning):
+    """Base class of the warnings of this package: the result is computed but needs the user's attention."""
+
+
+class TruncationWarning(VibroWarning):
+    """A result is computed on a truncated range that cuts off a noticeable part of the probability mass."""
