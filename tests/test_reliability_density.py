@@ -94,3 +94,14 @@ def test_defaults_are_unchanged_where_h_max_does_not_cover_the_mass():
     sd, _ = _mean("jump", 4.0)
     assert sd.h_support == 4.0 and np.all(np.isfinite(sd.log_p))
     assert sd.mean_energy == pytest.approx(0.5158129525464878, rel=1e-12)
+
+
+# regression: solve --tol 1e-300 died with an OverflowError in the Monte Carlo cost estimate
+@pytest.mark.parametrize("kwargs", [dict(tol=1e-300), dict(tol=0.0), dict(tol=float("nan")), dict(tol="0.02"),
+                                    dict(max_cost=float("inf")), dict(max_cost=-1.0)])
+def test_solver_request_beyond_double_precision_is_refused(kwargs):
+    from averaging.selection import choose
+
+    with pytest.raises(ParameterError) as info:
+        choose(DuffingImpact(), **{"tol": 0.02, **kwargs}, mc_pilot=False)
+    assert "\n" not in str(info.value)
