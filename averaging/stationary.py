@@ -537,9 +537,9 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
     law = model.restitution
     try:
         with np.errstate(all="ignore"):
-            _check_scale(model, m, nodes)
             if check:
                 check_confinement(model, m, h_max, nodes)
+            _check_scale(model, m, nodes)
             h, covered = _mass_range(model, m, law, nodes, h_max)
             tab, Hin, log_in, log_density, qH, qw = _solve(model, m, law, nodes, h, points)
             for _ in range(4 if covered and m.jumps else 0):

@@ -85,6 +85,10 @@ class ImpactOscillator:
     ):
         if name is not None:
             self.name = name
+        if isinstance(noise, (str, sp.Basic)) or not isinstance(noise, Sequence):
+            raise ModelError(f"noise={noise!r} must be a sequence of coefficients f_k(x, y), e.g. noise=(1,)")
+        if parameters is not None and not isinstance(parameters, Mapping):
+            raise ModelError(f"parameters={parameters!r} must be a mapping of names to values, e.g. {{'D': 0.05}}")
         self._declaration = dict(
             restoring=restoring, damping=damping, noise=tuple(noise), intensity=intensity,
             barriers=barriers, epsilon=epsilon, nonnegative=tuple(nonnegative), positive=tuple(positive),
@@ -111,7 +115,14 @@ class ImpactOscillator:
             d = real_symbol("delta")
             self.barrier_exprs = (-d, d)
         else:
-            left, right = barriers
+            try:
+                left, right = barriers
+            except (TypeError, ValueError) as exc:
+                raise ModelError(f"barriers={barriers!r} must be 'delta', a pair (left, right) of expressions, "
+                                 "or None") from exc
+            if left is None or right is None:
+                raise ModelError(f"barriers={barriers!r}: one-sided barriers (None on one side) are not supported "
+                                 "yet; give both positions, e.g. ('-delta', 'delta'), or barriers=None for none")
             self.barrier_exprs = (_as_expr(left, "left barrier"), _as_expr(right, "right barrier"))
         self.restitution = restitution if restitution is not None else Elastic()
         if not isinstance(self.restitution, RestitutionLaw):
@@ -157,6 +168,7 @@ class ImpactOscillator:
                     f"{where} uses {sorted(unknown)}, which are neither the states x, y nor parameters "
                     f"{sorted(self.params)}; add them to parameters={{...}}"
                 )
+        self._check_intensity()
         if Y in self.g.free_symbols:
             raise ModelError("the restoring force g may depend on x only; put velocity terms in the damping h(x, y)")
         if self.barrier_exprs is not None:
@@ -168,6 +180,24 @@ class ImpactOscillator:
                 raise ModelError(
                     f"barriers must enclose the equilibrium x = 0: got left={left:g}, right={right:g}"
                 )
+
+    def _check_intensity(self) -> None:
+        """A state-independent intensity matrix D_kl must be real, finite and positive semi-definite."""
+        D = self.substitute(self.intensity)
+        if D.free_symbols & {X, Y}:
+            return  # state-dependent: only the generated diffusion sigma**2 >= 0 can tell
+        try:
+            M = np.array(D.tolist(), dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"the noise intensity D_kl = {D.tolist()} is not real; use real values") from exc
+        if not np.all(np.isfinite(M)):
+            raise ParameterError(f"the noise intensity D_kl = {M.tolist()} is not finite")
+        low = float(np.linalg.eigvalsh(M).min())
+        if low < -1e-12 * max(1.0, float(np.abs(M).max())):
+            raise ParameterError(
+                f"the noise intensity D_kl = {M.tolist()} is not positive semi-definite (eigenvalue {low:.3g}): "
+                "E[xi_k xi_l] = 2 D_kl delta needs a covariance matrix; fix its entries"
+            )
 
     def with_params(self, **values: float) -> ImpactOscillator:
         """A copy with some parameters changed (the model itself is never mutated).

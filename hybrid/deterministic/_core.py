@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from hybrid.automaton import HybridAutomaton
-from hybrid.errors import ModelError, ParameterError, RestitutionError
+from hybrid.errors import ModelError, ParameterError, RestitutionError, VibroError
 
 from ._base import OrbitBackend
 from ._convert import finite_array, to_callable
@@ -258,10 +258,16 @@ def simulate_orbit(
         if step.fired is None:
             break
         tr = automaton.transitions[step.fired]
-        if tr.symbolic_reset:
-            new = np.array(resets[tr.name](state, pvalues), dtype=float)
-        else:
-            new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+        try:
+            if tr.symbolic_reset:
+                new = np.array(resets[tr.name](state, pvalues), dtype=float)
+            else:
+                new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+        except VibroError:
+            raise
+        except Exception as exc:  # a user reset or restitution callable that fails: one line, with where
+            raise ModelError(f"the reset of transition {tr.name!r} failed at t={t:.12g}, state {state.tolist()} "
+                             f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from exc
         if new.shape != state.shape or not np.all(np.isfinite(new)):
             status = "failed"
             message = f"reset of transition {tr.name!r} at t={t:.17g} gave {new} from {state}"
