@@ -7,6 +7,7 @@ conservative chain of :mod:`averaging.jump`, whose no-jump limit is eq. 30 exact
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 
 import numpy as np
@@ -529,7 +530,7 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
         raise ParameterError(f"nodes={nodes!r} must be an integer in [16, 4096] (Gauss nodes per orbit; default "
                              f"{DEFAULT_NODES}); fewer cannot resolve the orbit integrals near the turning points")
     if isinstance(h_max, bool) or not isinstance(h_max, (int, float, np.integer, np.floating)) or \
-            not (np.isfinite(h_max) and h_max > 0):
+            not (math.isfinite(float(h_max)) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     h_max = float(h_max)
     points = int(points)

@@ -100,6 +100,9 @@ class ImpactOscillator:
             raise ModelError("declare at least one noise coefficient (use noise=(1,) and D=0 for a free system)")
         m = len(self.f)
         if isinstance(intensity, (list, tuple)):
+            if not all(isinstance(row, (list, tuple)) for row in intensity):
+                raise ModelError(f"intensity={intensity!r} must be a scalar or an {m}x{m} nested sequence of "
+                                 "expressions, e.g. [['D', 0], [0, 'D']]")
             rows = [[_as_expr(v, "noise intensity") for v in row] for row in intensity]
             if len(rows) != m or any(len(r) != m for r in rows):
                 raise ModelError(f"intensity must be a {m}x{m} matrix for {m} noise coefficients")
@@ -193,7 +196,7 @@ class ImpactOscillator:
         if not np.all(np.isfinite(M)):
             raise ParameterError(f"the noise intensity D_kl = {M.tolist()} is not finite")
         low = float(np.linalg.eigvalsh(M).min())
-        if low < -1e-12 * max(1.0, float(np.abs(M).max())):
+        if low < -1e-12 * float(np.abs(M).max()):  # relative to the matrix itself: D = -1e-308 is negative too
             raise ParameterError(
                 f"the noise intensity D_kl = {M.tolist()} is not positive semi-definite (eigenvalue {low:.3g}): "
                 "E[xi_k xi_l] = 2 D_kl delta needs a covariance matrix; fix its entries"

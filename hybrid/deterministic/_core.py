@@ -64,6 +64,11 @@ def _check_inside(automaton, model, state, mode, values):
     if model is not None:
         left, right = model.barriers
         x, v = state
+        with np.errstate(all="ignore"):
+            H = float(model.energy(x, v))
+        if not np.isfinite(H):
+            raise ParameterError(f"initial state x0={x:g}, v0={v:g} has energy {H!r}: it overflows double "
+                                 "precision; start from a state of moderate size")
         if not (left <= x <= right):
             raise ParameterError(
                 f"initial position x0={x:g} is outside the gap [{left:g}, {right:g}] between the barriers; "
@@ -208,8 +213,9 @@ def simulate_orbit(
     if isinstance(max_steps, bool) or not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
         raise ParameterError(f"max_steps={max_steps!r} must be an integer >= 1 (default {_DEFAULT_MAX_STEPS})")
     if isinstance(zeno_window, bool) or not isinstance(zeno_window, (int, np.integer)) or \
-            not (zeno_window == 0 or zeno_window >= 2):
-        raise ParameterError(f"zeno_window={zeno_window!r} must be an integer >= 2, or 0 to switch detection off")
+            not (zeno_window == 0 or 2 <= zeno_window <= 10_000):
+        raise ParameterError(f"zeno_window={zeno_window!r} must be an integer in [2, 10000], or 0 to switch "
+                             "detection off")
     # a NaN spread limit would make every run of decreasing intervals look geometric
     if not (isinstance(zeno_rtol, (int, float)) and math.isfinite(zeno_rtol) and zeno_rtol >= 0):
         raise ParameterError(f"zeno_rtol={zeno_rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
@@ -233,7 +239,7 @@ def simulate_orbit(
     obs_names = list(automaton.observables)
     observe = to_callable([automaton.observables[k] for k in obs_names], automaton.states, pnames) if obs_names \
         else (lambda s, p: ())
-    zeno = ZenoDetector(zeno_window, zeno_rtol) if zeno_window else None
+    zeno = ZenoDetector(int(zeno_window), float(zeno_rtol)) if zeno_window else None
 
     rows_t, rows_tr, rows_src, rows_tgt, before, after, ob_before, ob_after = [], [], [], [], [], [], [], []
     engine.start(t0, state, mode)

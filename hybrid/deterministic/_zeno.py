@@ -28,7 +28,7 @@ class ZenoDetector:
     Raises
     ------
     ParameterError
-        ``window`` < 2, a negative or non-finite ``rtol``, or ``max_ratio`` outside (0, 1].
+        ``window`` outside [2, 10000], a negative or non-finite ``rtol``, or ``max_ratio`` outside (0, 1].
 
     Examples
     --------
@@ -40,8 +40,8 @@ class ZenoDetector:
     """
 
     def __init__(self, window: int = 6, rtol: float = 1e-3, max_ratio: float = 1.0):
-        if isinstance(window, bool) or not isinstance(window, int) or window < 2:
-            raise ParameterError(f"zeno window={window!r} must be an integer >= 2")
+        if isinstance(window, bool) or not isinstance(window, int) or not 2 <= window <= 10_000:
+            raise ParameterError(f"zeno window={window!r} must be an integer in [2, 10000]")
         if not (isinstance(rtol, (int, float)) and math.isfinite(rtol) and rtol >= 0):
             raise ParameterError(f"zeno rtol={rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
         if not (isinstance(max_ratio, (int, float)) and 0.0 < max_ratio <= 1.0):
