@@ -135,7 +135,7 @@ def get_method(method) -> ImpactMethod:
     """The method instance for a name or an instance; clear error for unknown names."""
     if isinstance(method, ImpactMethod):
         return method
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ParameterError(f"unknown averaging method {method!r}; choose one of {sorted(METHODS)}")
     return METHODS[method]
 

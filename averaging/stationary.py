@@ -7,11 +7,12 @@ conservative chain of :mod:`averaging.jump`, whose no-jump limit is eq. 30 exact
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 
 import numpy as np
 
-from hybrid.errors import ModelError, NormalisationError, ParameterError
+from hybrid.errors import ModelError, NormalisationError, ParameterError, VibroError
 
 from .jump import EnergyChain
 from .methods import ImpactMethod, get_method
@@ -189,12 +190,15 @@ class StationaryDensity:
     ['H', 'p']
     """
 
-    def __init__(self, model, method: ImpactMethod, table: EnergyTable, H, log_p, log_density, qH, qw):
+    def __init__(self, model, method: ImpactMethod, table: EnergyTable, H, log_p, log_density, qH, qw,
+                 h_max: float | None = None):
         self.model = model
         self.method = method.name
         self._method = method
         self.table = table
-        self.h_max = table.h_max
+        self.h_max = table.h_max if h_max is None else float(h_max)
+        self.h_support = table.h_max  # p is computed on [0, h_support]; 0 above (negligible mass there)
+        self.mass_above_h_max = 0.0
         self.H = H
         self.log_p = log_p
         with np.errstate(over="ignore"):
@@ -228,7 +232,7 @@ class StationaryDensity:
         0.0
         """
         H = np.asarray(H, dtype=float)
-        inside = (H >= 0) & (H <= self.h_max)
+        inside = (H >= 0) & (H <= self.h_support)
         out = np.zeros_like(H)
         if inside.any():
             out[inside] = np.exp(self._log_density(H[inside]))
@@ -236,7 +240,7 @@ class StationaryDensity:
 
     def _joint_energy(self, H):
         H = np.asarray(H, dtype=float)
-        inside = (H >= 0) & (H <= self.h_max)
+        inside = (H >= 0) & (H <= self.h_support)
         out = np.zeros_like(H)
         if inside.any():
             Hi = H[inside]
@@ -276,12 +280,12 @@ class StationaryDensity:
         x = np.atleast_1d(np.asarray(x, dtype=float))
         left, right = self.model.barriers
         Gx = self.model.potential(x)
-        ok = (x >= left) & (x <= right) & (Gx < self.h_max)
+        ok = (x >= left) & (x <= right) & (Gx < self.h_support)
         out = np.zeros_like(x)
         if not ok.any():
             return out
         Gx = Gx[ok]
-        ymax = np.sqrt(2.0 * (self.h_max - Gx))
+        ymax = np.sqrt(2.0 * (self.h_support - Gx))
         Gd = self.table.G_delta
         ykink = np.sqrt(2.0 * np.clip(Gd - Gx, 0.0, None)) if np.isfinite(Gd) else ymax
         ykink = np.minimum(ykink, ymax)
@@ -289,7 +293,7 @@ class StationaryDensity:
         total = np.zeros_like(Gx)
         for lo, hi in ((np.zeros_like(ymax), ykink), (ykink, ymax)):
             yy = 0.5 * (lo + hi)[:, None] + 0.5 * (hi - lo)[:, None] * t
-            vals = self._joint_energy(np.minimum(0.5 * yy**2 + Gx[:, None], self.h_max))
+            vals = self._joint_energy(np.minimum(0.5 * yy**2 + Gx[:, None], self.h_support))
             total += np.sum(vals * w, axis=1) * 0.5 * (hi - lo)
         out[ok] = 2.0 * total
         return out
@@ -310,12 +314,12 @@ class StationaryDensity:
         left, right = self.model.barriers
         out = np.zeros_like(y)
         kin = 0.5 * y * y
-        ok = kin < self.h_max
+        ok = kin < self.h_support
         if not ok.any():
             return out
         kin = kin[ok]
         # x range where H <= h_max, and the points where H crosses G(delta) (kinks of T)
-        lo, hi = turning_points(self.model, self.h_max - kin)
+        lo, hi = turning_points(self.model, self.h_support - kin)
         lo, hi = np.maximum(lo, left), np.minimum(hi, right)
         Gd = self.table.G_delta
         pieces = []
@@ -332,7 +336,7 @@ class StationaryDensity:
         total = np.zeros_like(kin)
         for a, b in pieces:
             xx = 0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * t
-            H = np.minimum(kin[:, None] + self.model.potential(xx), self.h_max)
+            H = np.minimum(kin[:, None] + self.model.potential(xx), self.h_support)
             total += np.sum(self._joint_energy(H) * w, axis=1) * 0.5 * (b - a)
         out[ok] = total
         return out
@@ -359,9 +363,131 @@ class StationaryDensity:
                 f"E[H]={self.mean_energy:.6g}, P(H<G)={self.prob_below_barrier:.6g})")
 
 
+_LOG_DROP = 40.0
+"""Beyond the energy where p(H) has fallen by e**-40 from its peak the mass is negligible (below about 1e-16)."""
+
+TAIL_WARN = 1e-3
+"""Mass above h_max beyond which :func:`stationary_density` warns (:class:`~hybrid.errors.TruncationWarning`)."""
+
+_MAX_POINTS = 10_000_000
+
+
+def _check_scale(model, m, nodes) -> None:
+    """Refuse parameters whose density varies on an energy scale double precision cannot handle (D = 1e-300).
+
+    The scale is 1 / |d log p / dH| = sigma2_bar / |2 m_bar - d sigma2_bar / dH| (eq. 30) at a few energies around
+    the model's own energy G(delta) (or G(1) without barriers). It must lie within 1e-100 to 1e100 of it.
+    """
+    G = geometry(model).G_delta
+    ref = float(G) if np.isfinite(G) else float(model.potential(1.0))
+    H = ref * np.array([0.25, 0.2501, 0.5, 0.5001, 0.9, 0.9001])
+    coef = averaged_coefficients(model, H, m if not m.jumps else "exact-two-impact", nodes)
+    s2 = coef.diffusion
+    with np.errstate(all="ignore"):
+        slope = (2.0 * coef.drift[::2] - np.diff(s2)[::2] / np.diff(H)[::2]) / s2[::2]
+        size = float(np.max(np.abs(slope))) * ref
+    if not (np.all(np.isfinite(slope)) and 1e-100 <= size <= 1e100):
+        scale = ref / size if size > 0 else float("inf")
+        raise NormalisationError(
+            f"p(H) varies on an energy scale of about {scale:.3g} against the model's energy {ref:.3g} (parameters "
+            f"{dict(model.params)}): double precision cannot represent that density; rescale the parameters "
+            "(noise intensity, damping) to moderate sizes"
+        )
+
+
+def _drop_energy(tab, drift, law, h: float) -> float | None:
+    """The first energy above the peak of p(H) in [0, h] where p has fallen by e**-_LOG_DROP, or None."""
+    Hs = np.unique(np.concatenate([np.linspace(0.0, h, 4001), np.geomspace(h * 1e-12, h, 2001)]))
+    with np.errstate(all="ignore"):
+        lp = tab.log_density(Hs, drift, law)
+    lp = np.where(np.isfinite(lp), lp, -np.inf)
+    k = int(np.argmax(lp))
+    if not np.isfinite(lp[k]):
+        return None
+    past = np.nonzero(lp[k:] < lp[k] - _LOG_DROP)[0]
+    return float(Hs[k + past[0]]) if past.size else None
+
+
+def _mass_range(model, m, law, nodes, h_max: float) -> tuple[float, bool]:
+    """(h, covered): an energy range [0, h], h <= h_max, fitted to where p(H) carries its mass.
+
+    ``covered`` is True when p has fallen by e**-40 inside [0, h]; the range then shrinks from h_max towards the
+    mass (a table and a grid spread over [0, 1e8] would not resolve a density living on [0, 20]). The jump method
+    is searched with its no-loss density p0, whose tail is the heavier one.
+    """
+    drift = None if m.jumps else m
+    h = float(h_max)
+    for _ in range(12):
+        hd = _drop_energy(energy_table(model, h, nodes), drift, law, h)
+        if hd is None:
+            if h >= h_max:
+                return h, False
+            h = min(h_max, 4.0 * h)  # shrank too far: p has not fallen yet
+            continue
+        if hd >= h / 4.0:
+            return h, True
+        h = 2.0 * hd
+    return h, True
+
+
+def _solve(model, m, law, nodes, h: float, points: int):
+    """The density on [0, h]: (table, internal grid, log p there, log-density function, quadrature nodes, weights)."""
+    tab = energy_table(model, h, nodes)
+    H = np.linspace(0.0, float(h), int(points))
+    if not m.jumps:
+        cuts = [v / np.sqrt(2.0) for v in m.speed_breakpoints(law)] if tab.has_impacts else []
+        qH, qw = tab.quadrature(cuts=cuts)
+        lq = tab.log_density(qH, m, law)
+        S = float(np.max(lq))
+        logZ = S + np.log(np.sum(qw * np.exp(lq - S)))
+
+        def log_density(e):
+            return tab.log_density(e, m, law) - logZ
+
+        return tab, H, log_density(H), log_density, qH, qw
+    chain = EnergyChain(tab, H, m, law)
+    r = chain.stationary_ratio()
+    Z = float(np.sum(chain.W * r))
+    logZ = chain.shift + np.log(Z)
+
+    def log_density(e):
+        return np.log(np.interp(e, H, r)) + tab.log_density(e, None, law) - logZ
+
+    return tab, H, np.log(r) + chain.logp0_nodes - logZ, log_density, chain.Hq, chain.wq
+
+
+def _tail_mass(model, m, law, nodes, h_max: float, points: int) -> tuple[float, bool]:
+    """(mass of p(H) above ``h_max``, exact): from a solution on a range grown from h_max until it covers the mass.
+
+    When p has not fallen by e**-40 before the range reaches 4**30 h_max or the coefficients overflow, the mass
+    is measured on the largest range reached and is a lower bound (``exact`` False).
+    """
+    drift = None if m.jumps else m
+    h, good, exact = float(h_max), float(h_max), False
+    for _ in range(30):
+        h *= 4.0
+        try:
+            found = _drop_energy(energy_table(model, h, nodes), drift, law, h)
+        except NormalisationError:  # the coefficients overflow this far out
+            break
+        good = h
+        if found is not None:
+            exact = True
+            break
+    if exact:
+        good, _ = _mass_range(model, m, law, nodes, good)
+    _, _, _, log_density, qH, qw = _solve(model, m, law, nodes, good, points)
+    p = np.exp(log_density(qH)) * qw
+    return float(np.sum(p[qH > h_max]) / np.sum(p)), exact
+
+
 def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 2000,
                        nodes: int = DEFAULT_NODES, check: bool = True) -> StationaryDensity:
     """The stationary energy density p(H) on ``points`` energies in [0, h_max], normalised to 1 there.
+
+    The density is computed on the part of [0, h_max] where it carries its mass: above the energy where p has
+    fallen by e**-40 from its peak, ``p`` is 0 on the output grid, so the answer does not depend on h_max once
+    h_max covers the mass (a huge h_max no longer spreads the grid and the quadrature over empty energies).
 
     Parameters
     ----------
@@ -370,13 +496,23 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
     method : str or ImpactMethod
         ``paper`` (eq. 13 loss as drift), ``exact-two-impact``, or ``jump`` (impacts as jumps).
     h_max : float
-        Upper end of the energy range; mass above it is discarded (choose it in the tail).
+        Upper end of the energy range. Mass above it is discarded (the density is the one conditional on
+        H <= h_max): when that is more than :data:`TAIL_WARN` of the total, a
+        :class:`~hybrid.errors.TruncationWarning` says how much (``result.mass_above_h_max``).
     points : int
-        Grid size (the jump method solves on this grid, so it also sets its resolution).
+        Output grid size (the jump method solves on this many energies over the range carrying the mass).
     nodes : int
-        Gauss-Legendre nodes per orbit quadrature.
+        Gauss-Legendre nodes per orbit quadrature (>= 16).
     check : bool
         Check confinement first (raises :class:`NormalisationError` when p cannot be normalised).
+
+    Raises
+    ------
+    ParameterError
+        ``points``, ``h_max`` or ``nodes`` of the wrong type or out of range.
+    NormalisationError
+        No stationary density, or one that double precision cannot represent (its energy scale under- or
+        overflows, e.g. D = 1e-300).
 
     Examples
     --------
@@ -385,44 +521,62 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
     >>> 0.0 < sd.prob_below_barrier < 1.0
     True
     """
+    import warnings
+
+    from hybrid.errors import TruncationWarning
+
     m = get_method(method)
-    if int(points) != points or points < 3:
-        raise ParameterError(f"points={points!r} must be an integer >= 3")
-    if not (np.isfinite(h_max) and h_max > 0):
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or not 3 <= points <= _MAX_POINTS:
+        raise ParameterError(f"points={points!r} must be an integer in [3, {_MAX_POINTS:.0e}] (the output grid size)")
+    if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not 16 <= nodes <= 4096:
+        raise ParameterError(f"nodes={nodes!r} must be an integer in [16, 4096] (Gauss nodes per orbit; default "
+                             f"{DEFAULT_NODES}); fewer cannot resolve the orbit integrals near the turning points")
+    if isinstance(h_max, bool) or not isinstance(h_max, (int, float, np.integer, np.floating)) or \
+            not (math.isfinite(float(h_max)) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
+    h_max = float(h_max)
+    points = int(points)
     geometry(model)  # raises ModelError for asymmetric impact levels
-    if check:
-        check_confinement(model, m, h_max, nodes)
-    tab = energy_table(model, h_max, nodes)
     law = model.restitution
-    H = np.linspace(0.0, float(h_max), int(points))
-    if not m.jumps:
-        cuts = [v / np.sqrt(2.0) for v in m.speed_breakpoints(law)] if tab.has_impacts else []
-        qH, qw = tab.quadrature(cuts=cuts)
-        lq = tab.log_density(qH, m, law)
-        S = float(np.max(lq))
-        logZ = S + np.log(np.sum(qw * np.exp(lq - S)))
-
-        def log_density(h):
-            return tab.log_density(h, m, law) - logZ
-
-        log_p = log_density(H)
-    else:
-        chain = EnergyChain(tab, H, m, law)
-        r = chain.stationary_ratio()
-        Z = float(np.sum(chain.W * r))
-        logZ = chain.shift + np.log(Z)
-
-        def log_density(h):
-            return np.log(np.interp(h, H, r)) + tab.log_density(h, None, law) - logZ
-
-        log_p = np.log(r) + chain.logp0_nodes - logZ
-        qH, qw = chain.Hq, chain.wq
-    sd = StationaryDensity(model, m, tab, H, log_p, log_density, qH, qw)
+    try:
+        with np.errstate(all="ignore"):
+            if check:
+                check_confinement(model, m, h_max, nodes)
+            _check_scale(model, m, nodes)
+            h, covered = _mass_range(model, m, law, nodes, h_max)
+            tab, Hin, log_in, log_density, qH, qw = _solve(model, m, law, nodes, h, points)
+            for _ in range(4 if covered and m.jumps else 0):
+                # the range came from the no-loss p0; the jumps make p fall sooner: fit the grid to p itself
+                k = int(np.argmax(log_in))
+                past = np.nonzero(log_in[k:] < log_in[k] - _LOG_DROP)[0]
+                if not past.size or Hin[k + past[0]] >= h / 1.5:
+                    break
+                h = 1.25 * float(Hin[k + past[0]])
+                # the chain's accuracy is set by its spacing: at least 8001 nodes over the mass
+                tab, Hin, log_in, log_density, qH, qw = _solve(model, m, law, nodes, h, max(points, 8001))
+            tail, exact = (0.0, True) if covered else _tail_mass(model, m, law, nodes, h_max, points)
+    except (ValueError, ZeroDivisionError, FloatingPointError, OverflowError) as exc:
+        if isinstance(exc, VibroError):
+            raise
+        raise NormalisationError(
+            f"p(H) cannot be computed in double precision for these parameters {dict(model.params)} "
+            f"({type(exc).__name__}); its energy scale under- or overflows: use parameters of moderate size"
+        ) from exc
+    H = np.linspace(0.0, h_max, points)
+    inside = H <= h
+    log_p = np.full(points, -np.inf)
+    log_p[inside] = log_density(H[inside]) if h < h_max else log_in
+    sd = StationaryDensity(model, m, tab, H, log_p, log_density, qH, qw, h_max=h_max)
+    sd.mass_above_h_max = tail
     stats = (sd.mean_energy, sd.mean_x2, sd.prob_below_barrier, sd.impact_rate, sd.total_mass)
-    if not (np.all(np.isfinite(log_p[1:])) and np.all(np.isfinite(stats)) and abs(sd.total_mass - 1) < 1e-6):
+    if not (np.all(np.isfinite(log_p[1:][inside[1:]])) and np.all(np.isfinite(stats))
+            and abs(sd.total_mass - 1) < 1e-6):
         raise NormalisationError(
             f"p(H) could not be normalised accurately (total mass {sd.total_mass!r}); increase points or check "
             "the model's parameters"
         )
+    if tail > TAIL_WARN:
+        warnings.warn(TruncationWarning(
+            f"h_max={h_max:g} cuts off {'' if exact else 'at least '}{tail:.3g} of the stationary probability mass "
+            "(the density returned is the one conditional on H <= h_max); raise h_max to cover the mass"), stacklevel=2)
     return sd

@@ -8,6 +8,7 @@ direction; it then maps the state through its reset and switches mode. Simulator
 
 from __future__ import annotations
 
+import tokenize
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -38,8 +39,16 @@ def canonical(expr: sp.Expr) -> sp.Expr:
 def _as_expr(value, where: str) -> sp.Expr:
     try:
         expr = sp.sympify(value, locals=_LOCALS) if isinstance(value, str) else sp.sympify(value)
-    except (sp.SympifyError, TypeError, SyntaxError) as exc:
-        raise ModelError(f"{where}: cannot read {value!r} as a sympy expression ({exc})") from exc
+    except Exception as exc:  # sympify evaluates the text: any error is a bad expression, not a crash
+        cause = getattr(exc, "base_exc", None) or exc
+        reason = "invalid syntax" if isinstance(cause, (SyntaxError, tokenize.TokenError)) else type(cause).__name__
+        raise ModelError(f"{where}: cannot read {value!r} as an expression ({reason}); write it in Python syntax "
+                         "with the state and parameter names, e.g. 'a*x + b*x**3' or '1/(1 + v)'") from exc
+    if not isinstance(expr, sp.Expr):
+        raise ModelError(f"{where}: {value!r} is not an algebraic expression")
+    if expr.has(sp.zoo, sp.nan, sp.I):
+        raise ModelError(f"{where}: {value!r} is not a finite real expression (it contains {expr}); "
+                         "use real, finite terms")
     return canonical(expr)
 
 

@@ -30,4 +30,8 @@ class StepSizeError(VibroError):
 
 
 class VibroWarning(UserWarning):
-    """Base class of the framework's warnings: a result that holds but carries a stated caveat."""
+    """Base class of the warnings of this package: the result is computed but needs the user's attention."""
+
+
+class TruncationWarning(VibroWarning):
+    """A result is computed on a truncated range that cuts off a noticeable part of the probability mass."""

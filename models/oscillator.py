@@ -87,6 +87,10 @@ class ImpactOscillator:
     ):
         if name is not None:
             self.name = name
+        if isinstance(noise, (str, sp.Basic)) or not isinstance(noise, Sequence):
+            raise ModelError(f"noise={noise!r} must be a sequence of coefficients f_k(x, y), e.g. noise=(1,)")
+        if parameters is not None and not isinstance(parameters, Mapping):
+            raise ModelError(f"parameters={parameters!r} must be a mapping of names to values, e.g. {{'D': 0.05}}")
         self._declaration = dict(
             restoring=restoring, damping=damping, noise=tuple(noise), intensity=intensity,
             barriers=barriers, epsilon=epsilon, nonnegative=tuple(nonnegative), positive=tuple(positive),
@@ -98,6 +102,9 @@ class ImpactOscillator:
             raise ModelError("declare at least one noise coefficient (use noise=(1,) and D=0 for a free system)")
         m = len(self.f)
         if isinstance(intensity, (list, tuple)):
+            if not all(isinstance(row, (list, tuple)) for row in intensity):
+                raise ModelError(f"intensity={intensity!r} must be a scalar or an {m}x{m} nested sequence of "
+                                 "expressions, e.g. [['D', 0], [0, 'D']]")
             rows = [[_as_expr(v, "noise intensity") for v in row] for row in intensity]
             if len(rows) != m or any(len(r) != m for r in rows):
                 raise ModelError(f"intensity must be a {m}x{m} matrix for {m} noise coefficients")
@@ -170,6 +177,7 @@ class ImpactOscillator:
                     f"{where} uses {sorted(unknown)}, which are neither the states x, y nor parameters "
                     f"{sorted(self.params)}; add them to parameters={{...}}"
                 )
+        self._check_intensity()
         if Y in self.g.free_symbols:
             raise ModelError("the restoring force g may depend on x only; put velocity terms in the damping h(x, y)")
         if self.barrier_exprs is not None:
@@ -182,6 +190,24 @@ class ImpactOscillator:
                     f"barriers must enclose or touch the equilibrium x = 0 (left <= 0 <= right): got left={left:g}, "
                     f"right={right:g}"
                 )
+
+    def _check_intensity(self) -> None:
+        """A state-independent intensity matrix D_kl must be real, finite and positive semi-definite."""
+        D = self.substitute(self.intensity)
+        if D.free_symbols & {X, Y}:
+            return  # state-dependent: only the generated diffusion sigma**2 >= 0 can tell
+        try:
+            M = np.array(D.tolist(), dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"the noise intensity D_kl = {D.tolist()} is not real; use real values") from exc
+        if not np.all(np.isfinite(M)):
+            raise ParameterError(f"the noise intensity D_kl = {M.tolist()} is not finite")
+        low = float(np.linalg.eigvalsh(M).min())
+        if low < -1e-12 * float(np.abs(M).max()):  # relative to the matrix itself: D = -1e-308 is negative too
+            raise ParameterError(
+                f"the noise intensity D_kl = {M.tolist()} is not positive semi-definite (eigenvalue {low:.3g}): "
+                "E[xi_k xi_l] = 2 D_kl delta needs a covariance matrix; fix its entries"
+            )
 
     def with_params(self, **values: float) -> ImpactOscillator:
         """A copy with some parameters changed (the model itself is never mutated).

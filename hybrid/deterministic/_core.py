@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from hybrid.automaton import HybridAutomaton
-from hybrid.errors import ModelError, ParameterError
+from hybrid.errors import ModelError, ParameterError, RestitutionError, VibroError
 
 from ._base import OrbitBackend
 from ._convert import finite_array, to_callable
@@ -16,6 +16,17 @@ from ._heyoka import HeyokaBackend
 from ._result import ImpactLog, OrbitResult, Trajectory
 from ._scipy import ScipyBackend
 from ._zeno import ZenoDetector
+
+MAX_LOG_BYTES = 4 * 2**30
+"""Largest impact log ``max_impacts`` may ask for (about 4 GiB), so that a huge value is refused up front."""
+
+_DEFAULT_MAX_STEPS = 10_000_000
+
+
+def _log_bytes_per_impact(d: int, n_obs: int) -> int:
+    """Estimated memory of one impact-log row while the run lasts (Python lists of small arrays and floats)."""
+    return 2 * (112 + 8 * d) + 2 * 56 * (1 + n_obs) + 4 * 8 + 24 + 8 * (2 * d + 2 * n_obs + 1)
+
 
 BACKENDS: dict[str, type[OrbitBackend]] = {"heyoka": HeyokaBackend, "scipy": ScipyBackend}
 """Registered deterministic backends; ``simulate_orbit(backend=...)`` takes a name or an OrbitBackend subclass."""
@@ -54,6 +65,11 @@ def _check_inside(automaton, model, state, mode, values):
     if model is not None:
         left, right = model.barriers
         x, v = state
+        with np.errstate(all="ignore"):
+            H = float(model.energy(x, v))
+        if not np.isfinite(H):
+            raise ParameterError(f"initial state x0={x:g}, v0={v:g} has energy {H!r}: it overflows double "
+                                 "precision; start from a state of moderate size")
         if not (left <= x <= right):
             raise ParameterError(
                 f"initial position x0={x:g} is outside the gap [{left:g}, {right:g}] between the barriers; "
@@ -75,6 +91,19 @@ def _check_inside(automaton, model, state, mode, values):
             )
 
 
+def _check_coefficient(model, t, before, after) -> None:
+    """Refuse an impact whose applied coefficient -v+/v- is outside (0, 1] (the law is checked on a grid only)."""
+    vm, vp = float(before[1]), float(after[1])
+    if vm == 0.0:
+        return  # a grazing contact: no coefficient is applied
+    e = -vp / vm
+    if not (0.0 < e <= 1.0 + 1e-12):
+        raise RestitutionError(
+            f"restitution law {model.restitution!r} gave e = {e:.17g} at the impact at t={t:.12g} with speed "
+            f"|v-| = {abs(vm):.17g}, outside (0, 1]; fix the law so that 0 < e(v) <= 1 at every speed"
+        )
+
+
 def simulate_orbit(
     system,
     x0,
@@ -89,6 +118,7 @@ def simulate_orbit(
     dense: bool = False,
     min_dwell: float = 1e-9,
     max_impacts: int = 1_000_000,
+    max_steps: int = _DEFAULT_MAX_STEPS,
     zeno_window: int = 6,
     zeno_rtol: float = 1e-3,
     **options,
@@ -122,23 +152,34 @@ def simulate_orbit(
     min_dwell : float
         Minimum time between two transitions; a shorter interval stops the run with status ``'chattering'``.
     max_impacts : int
-        Stop with status ``'max_impacts'`` after this many transitions.
+        Stop with status ``'max_impacts'`` after this many transitions. Refused when the impact log it allows
+        would exceed :data:`MAX_LOG_BYTES`.
+    max_steps : int
+        Stop with status ``'max_steps'`` after this many integration steps in all (default 10**7), so that a
+        huge ``t_end`` cannot run unbounded; raise it for long runs.
     zeno_window, zeno_rtol : int, float
-        Zeno detection: ``zeno_window`` successive ratios of inter-impact intervals agreeing within ``zeno_rtol``
-        and below 0.99 predict an accumulation t_k + dt_k r / (1 - r); if it falls before ``t_end`` the run stops
-        with status ``'zeno'`` and ``zeno_time`` set. ``zeno_window=0`` switches detection off.
+        Zeno detection: ``zeno_window`` successive ratios r < 1 of inter-impact intervals whose deficits 1 - r
+        agree within ``zeno_rtol`` (relative) predict an accumulation t_k + dt_k r / (1 - r); if it falls before
+        ``t_end`` the run stops with status ``'zeno'`` and ``zeno_time`` set. ``zeno_window=0`` switches
+        detection off.
     **options
         Backend options (scipy: ``method='DOP853'``, ``max_step``).
 
     Returns
     -------
     OrbitResult
+        After every integration step the state is checked against the directed guards of its mode; a state past
+        one (an impact the integrator missed) stops the run with status ``'left_admissible_set'``, never ``'ok'``.
 
     Raises
     ------
     ParameterError
         Non-finite or reversed times, a state of the wrong length, a state outside the gap or past a guard,
-        bad tolerances, unknown backend.
+        bad tolerances (below what double precision delivers), unknown backend, ``max_impacts`` or ``max_steps``
+        out of range.
+    RestitutionError
+        For a model: an impact whose applied coefficient e = -v+/v- lies outside (0, 1] (a law that is only
+        valid on the grid :meth:`RestitutionLaw.validate` checks); the message gives the speed and e.
 
     Examples
     --------
@@ -161,11 +202,21 @@ def simulate_orbit(
     automaton.mode(mode)  # unknown mode -> ModelError
     if not (isinstance(min_dwell, (int, float)) and math.isfinite(min_dwell) and min_dwell >= 0):
         raise ParameterError(f"min_dwell={min_dwell!r} must be a finite time >= 0")
-    if not (isinstance(max_impacts, (int, np.integer)) and max_impacts >= 1):
+    if isinstance(max_impacts, bool) or not (isinstance(max_impacts, (int, np.integer)) and max_impacts >= 1):
         raise ParameterError(f"max_impacts={max_impacts!r} must be an integer >= 1")
+    row = _log_bytes_per_impact(len(names), len(automaton.observables))
+    if max_impacts * row > MAX_LOG_BYTES:
+        raise ParameterError(
+            f"max_impacts={max_impacts} allows an impact log of about {max_impacts * row / 2**30:.3g} GiB "
+            f"(~{row} bytes per impact), above the {MAX_LOG_BYTES / 2**30:g} GiB limit; use at most "
+            f"{MAX_LOG_BYTES // row} impacts"
+        )
+    if isinstance(max_steps, bool) or not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
+        raise ParameterError(f"max_steps={max_steps!r} must be an integer >= 1 (default {_DEFAULT_MAX_STEPS})")
     if isinstance(zeno_window, bool) or not isinstance(zeno_window, (int, np.integer)) or \
-            not (zeno_window == 0 or zeno_window >= 2):
-        raise ParameterError(f"zeno_window={zeno_window!r} must be an integer >= 2, or 0 to switch detection off")
+            not (zeno_window == 0 or 2 <= zeno_window <= 10_000):
+        raise ParameterError(f"zeno_window={zeno_window!r} must be an integer in [2, 10000], or 0 to switch "
+                             "detection off")
     # a NaN spread limit would make every run of decreasing intervals look geometric
     if not (isinstance(zeno_rtol, (int, float)) and math.isfinite(zeno_rtol) and zeno_rtol >= 0):
         raise ParameterError(f"zeno_rtol={zeno_rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
@@ -189,7 +240,7 @@ def simulate_orbit(
     obs_names = list(automaton.observables)
     observe = to_callable([automaton.observables[k] for k in obs_names], automaton.states, pnames) if obs_names \
         else (lambda s, p: ())
-    zeno = ZenoDetector(zeno_window, zeno_rtol) if zeno_window else None
+    zeno = ZenoDetector(int(zeno_window), float(zeno_rtol)) if zeno_window else None
 
     rows_t, rows_tr, rows_src, rows_tgt, before, after, ob_before, ob_after = [], [], [], [], [], [], [], []
     engine.start(t0, state, mode)
@@ -197,23 +248,39 @@ def simulate_orbit(
     t_last = -math.inf
     t = t0
     while True:
-        step = engine.advance(t_end)
+        step = engine.advance(t_end, max_steps - n_steps)
         n_steps += step.steps
         t, state = step.t, step.state
         if step.failed:
             status, message = "failed", step.failed
             break
+        if step.outside:
+            status, message = "left_admissible_set", step.outside
+            break
+        if step.step_limit:
+            status = "max_steps"
+            message = (f"stopped after max_steps={max_steps} integration steps at t={t:.12g} before t_end={t_end:g}; "
+                       "raise max_steps (or shorten t_end) to go on")
+            break
         if step.fired is None:
             break
         tr = automaton.transitions[step.fired]
-        if tr.symbolic_reset:
-            new = np.array(resets[tr.name](state, pvalues), dtype=float)
-        else:
-            new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+        try:
+            if tr.symbolic_reset:
+                new = np.array(resets[tr.name](state, pvalues), dtype=float)
+            else:
+                new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+        except VibroError:
+            raise
+        except Exception as exc:  # a user reset or restitution callable that fails: one line, with where
+            raise ModelError(f"the reset of transition {tr.name!r} failed at t={t:.12g}, state {state.tolist()} "
+                             f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from exc
         if new.shape != state.shape or not np.all(np.isfinite(new)):
             status = "failed"
             message = f"reset of transition {tr.name!r} at t={t:.17g} gave {new} from {state}"
             break
+        if model is not None:
+            _check_coefficient(model, t, state, new)
         rows_t.append(t)
         rows_tr.append(tr.name)
         rows_src.append(tr.source)
@@ -265,6 +332,7 @@ def simulate_orbit(
             mode=np.array([s[2] for s in engine.samples], dtype=object), state_names=tuple(names),
         )
     settings = {"backend": engine.name, "t0": t0, "t_end": t_end, "min_dwell": min_dwell, "max_impacts": max_impacts,
+                "max_steps": max_steps,
                 "zeno_window": zeno_window, "zeno_rtol": zeno_rtol, "parameters": dict(values), **engine.settings()}
     if model is not None:
         settings["restitution"] = model.restitution.spec()

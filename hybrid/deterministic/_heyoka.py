@@ -25,6 +25,7 @@ from hybrid.errors import ModelError, ParameterError
 from ._base import Advance, OrbitBackend
 from ._convert import automaton_fingerprint, to_callable, to_heyoka
 
+_EPS = float(np.finfo(float).eps)
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_SIZE = 32
 
@@ -127,8 +128,17 @@ class HeyokaBackend(OrbitBackend):
     def __init__(self, automaton, params, rtol=None, atol=None, dense=False, **options):
         if options:
             raise ParameterError(f"heyoka backend: unknown options {sorted(options)}")
-        if rtol is not None and not (0 < rtol < 1):
-            raise ParameterError(f"heyoka tolerance rtol={rtol!r} must lie in (0, 1), e.g. 1e-15")
+        if rtol is not None:
+            try:
+                rtol = float(rtol)
+            except (TypeError, ValueError) as exc:
+                raise ParameterError(f"heyoka tolerance rtol={rtol!r} is not a number") from exc
+            # below machine epsilon double precision cannot deliver the accuracy (and heyoka's Taylor order,
+            # hence its compile time, grows without bound)
+            if not (_EPS <= rtol < 1):
+                raise ParameterError(f"heyoka tolerance rtol={rtol!r} must lie in [{_EPS:.3g}, 1) (double precision "
+                                     "cannot deliver less than machine epsilon); e.g. 1e-15, or omit it for "
+                                     f"{_EPS:.3g}")
         if atol is not None:  # it used to be ignored silently
             raise ParameterError(f"heyoka has one tolerance, rtol; atol={atol!r} is not used: drop it or use "
                                  "backend='scipy'")
@@ -179,29 +189,40 @@ class HeyokaBackend(OrbitBackend):
             self.samples.append((float(t0), np.array(state, dtype=float), mode))
 
     def restart(self, t, state, mode, fired=None):
+        self.fresh = True
         self.ta.state[:] = state
         self._set_mode(mode)
         self._escape = self._zero_guards(self.ta.state, mode, fired)
 
-    def _record(self, ta) -> bool:
-        self.samples.append((ta.time, ta.state.copy(), self.mode))
-        return True
+    def _after_step(self, ta) -> bool:
+        """heyoka's step callback: record the step (dense output) and stop when the state left the admissible set."""
+        if self.dense:
+            self.samples.append((ta.time, ta.state.copy(), self.mode))
+        self._outside, self._before = self.check_step(ta.time, ta.state, self.mode, self._before)
+        self.fresh = False
+        return self._outside is None
 
-    def _propagate(self, t_end) -> Advance:
+    def _propagate(self, t_end, max_steps=0) -> Advance:
         import heyoka as hy
 
-        out = self.ta.propagate_until(float(t_end), callback=self._record if self.dense else None)
+        self._outside = None
+        self._before = self.signed_guards(self.ta.state, self.mode)
+        out = self.ta.propagate_until(float(t_end), max_steps=int(max_steps), callback=self._after_step)
         outcome, steps = out[0], int(out[3])
         state = self.ta.state.copy()
         if outcome == hy.taylor_outcome.time_limit:
             return Advance(self.ta.time, state, None, steps)
+        if outcome == hy.taylor_outcome.cb_stop:
+            return Advance(self.ta.time, state, None, steps, outside=self._outside)
+        if outcome == hy.taylor_outcome.step_limit:
+            return Advance(self.ta.time, state, None, steps, step_limit=True)
         code = int(outcome)
         if -len(self.automaton.transitions) <= code < 0:
             return Advance(self.ta.time, state, -code - 1, steps)
         return Advance(self.ta.time, state, None, steps,
                        failed=f"heyoka stopped with outcome {outcome!r} at t={self.ta.time:.17g}, state={state}")
 
-    def advance(self, t_end):
+    def advance(self, t_end, max_steps=0):
         steps = 0
         if self._escape:
             # heyoka misses crossings in a step whose event polynomial starts at exactly zero: leave the guard
@@ -215,10 +236,13 @@ class HeyokaBackend(OrbitBackend):
                     continue  # now in heyoka's cooldown
                 break
             self._escape = set()
-            if res.fired is not None or res.failed or res.t >= t_end:
+            self.fresh = True  # the escape step is part of leaving the start point
+            if res.fired is not None or res.failed or res.outside or res.t >= t_end:
                 res.steps = steps
                 return res
-        res = self._propagate(t_end)
+        if max_steps and steps >= max_steps:
+            return Advance(self.ta.time, self.ta.state.copy(), None, steps, step_limit=True)
+        res = self._propagate(t_end, max_steps - steps if max_steps else 0)
         res.steps += steps
         return res
 

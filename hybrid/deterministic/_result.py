@@ -9,7 +9,7 @@ import numpy as np
 
 from hybrid.io import write_csv_atomically
 
-STATUSES = ("ok", "zeno", "chattering", "max_impacts", "failed")
+STATUSES = ("ok", "zeno", "chattering", "max_impacts", "max_steps", "left_admissible_set", "failed")
 """Possible values of :attr:`OrbitResult.status`."""
 
 
@@ -148,7 +148,9 @@ class OrbitResult:
     ----------
     status : str
         ``'ok'`` (reached ``t_end``), ``'zeno'`` (impact times accumulate geometrically; see ``zeno_time``),
-        ``'chattering'`` (two transitions closer than ``min_dwell``), ``'max_impacts'`` or ``'failed'``.
+        ``'chattering'`` (two transitions closer than ``min_dwell``), ``'max_impacts'``, ``'max_steps'`` (the step
+        budget ran out before ``t_end``), ``'left_admissible_set'`` (a step ended past a guard: the integrator
+        missed an impact, and the run stopped there) or ``'failed'``.
     message : str
     t, state, mode : final time, state and mode
     impacts : ImpactLog

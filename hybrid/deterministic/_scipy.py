@@ -28,6 +28,7 @@ METHODS = {"DOP853": DOP853, "RK45": RK45, "RK23": RK23, "Radau": Radau, "BDF": 
 """scipy solvers accepted by ``method=``."""
 
 _EPS = np.finfo(float).eps
+_MIN_RTOL = 100 * _EPS
 
 
 class ScipyBackend(OrbitBackend):
@@ -48,10 +49,15 @@ class ScipyBackend(OrbitBackend):
     name = "scipy"
 
     def __init__(self, automaton, params, rtol=None, atol=None, dense=False, method="DOP853", max_step=np.inf):
-        rtol = 1e-10 if rtol is None else float(rtol)
-        atol = rtol * 1e-2 if atol is None else float(atol)
-        if not (0 < rtol < 1) or not (atol > 0):
-            raise ParameterError(f"scipy tolerances must satisfy 0 < rtol < 1 and atol > 0, got {rtol!r}, {atol!r}")
+        try:
+            rtol = 1e-10 if rtol is None else float(rtol)
+            atol = rtol * 1e-2 if atol is None else float(atol)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"scipy tolerances rtol={rtol!r}, atol={atol!r} must be numbers") from exc
+        # scipy itself raises rtol below 100 eps to 100 eps with a warning: refuse instead of running looser
+        if not (_MIN_RTOL <= rtol < 1) or not (0 < atol < np.inf):
+            raise ParameterError(f"scipy tolerances must satisfy {_MIN_RTOL:.3g} <= rtol < 1 (double precision) and "
+                                 f"0 < atol < inf, got rtol={rtol!r}, atol={atol!r}")
         try:
             max_step = float(max_step)
         except (TypeError, ValueError) as exc:
@@ -95,6 +101,7 @@ class ScipyBackend(OrbitBackend):
         self.y = np.array(state, dtype=float)
         self.mode = mode
         self._cooling = fired
+        self.fresh = True
 
     def _guard(self, j, y) -> float:
         return self._guards[j](y, self._values)[0]
@@ -127,7 +134,7 @@ class ScipyBackend(OrbitBackend):
                 return brentq(lambda s: self._guard(j, sol(s)), a, b, xtol=4 * _EPS, rtol=4 * _EPS)
         return None
 
-    def advance(self, t_end):
+    def advance(self, t_end, max_steps=0):
         flow, values = self._flows[self.mode], self._values
 
         def fun(t, y):
@@ -139,11 +146,15 @@ class ScipyBackend(OrbitBackend):
             return Advance(self.t, self.y.copy(), None, 0)
         solver = self.method(fun, self.t, self.y, t_end, rtol=self.rtol, atol=self.atol, max_step=self.max_step)
         g_old = [self._guard(j, self.y) for j in active]
+        before = self.signed_guards(self.y, self.mode)
         # cooldown: the event location is exact only to rounding, so the guard that just fired may sit a hair on
         # its old side; crossings of it closer than `cool` to the restart are that rounding, not a new event
         cooling, t_start = getattr(self, "_cooling", None), self.t
         cool = 1e-12 * max(1.0, abs(t_start))
         while True:
+            if max_steps and steps >= max_steps:
+                self.t, self.y = solver.t, solver.y.copy()
+                return Advance(self.t, self.y.copy(), None, steps, step_limit=True)
             message = solver.step()
             steps += 1
             if solver.status == "failed":
@@ -186,6 +197,11 @@ class ScipyBackend(OrbitBackend):
                 return Advance(t_hit, y_hit.copy(), j, steps)
             if self.dense:
                 self.samples.append((t_new, solver.y.copy(), self.mode))
+            outside, before = self.check_step(t_new, solver.y, self.mode, before)
+            if outside:
+                self.t, self.y = t_new, solver.y.copy()
+                return Advance(self.t, self.y.copy(), None, steps, outside=outside)
+            self.fresh = False
             g_old = g_new
             cooling = None
             if solver.status == "finished":

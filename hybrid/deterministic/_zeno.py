@@ -2,23 +2,33 @@
 
 from __future__ import annotations
 
+import math
 from collections import deque
+
+from hybrid.errors import ParameterError
 
 
 class ZenoDetector:
     """Watch transition times; flag a geometric accumulation t_k + dt_k r / (1 - r).
 
-    The ratios of successive intervals r_i = dt_{i+1} / dt_i must stay below ``max_ratio`` and agree within
-    ``rtol`` (relative spread) over ``window`` ratios. The prediction is the sum of the remaining geometric series.
+    The ratios of successive intervals r_i = dt_{i+1} / dt_i must lie in (0, ``max_ratio``) and their deficits
+    1 - r_i must agree within ``rtol`` (relative spread) over ``window`` ratios. Comparing the deficits rather than
+    the ratios is what separates an accumulation at any ratio below 1 (constant deficit) from intervals that
+    converge to a period (the deficit itself decays to 0). The prediction is the sum of the remaining series.
 
     Parameters
     ----------
     window : int
         Number of successive ratios that must agree (needs ``window + 2`` transitions).
     rtol : float
-        Allowed relative spread (max - min) / mean of those ratios.
+        Allowed relative spread (max - min) / mean of the deficits 1 - r_i.
     max_ratio : float
-        Ratios at or above this are not an accumulation (intervals converging to a period have ratio -> 1).
+        Ratios at or above this are not an accumulation (default 1: any ratio below 1 counts).
+
+    Raises
+    ------
+    ParameterError
+        ``window`` outside [2, 10000], a negative or non-finite ``rtol``, or ``max_ratio`` outside (0, 1].
 
     Examples
     --------
@@ -29,9 +39,13 @@ class ZenoDetector:
     2.0
     """
 
-    def __init__(self, window: int = 6, rtol: float = 1e-3, max_ratio: float = 0.99):
-        if window < 2:
-            raise ValueError(f"zeno window must be >= 2, got {window}")
+    def __init__(self, window: int = 6, rtol: float = 1e-3, max_ratio: float = 1.0):
+        if isinstance(window, bool) or not isinstance(window, int) or not 2 <= window <= 10_000:
+            raise ParameterError(f"zeno window={window!r} must be an integer in [2, 10000]")
+        if not (isinstance(rtol, (int, float)) and math.isfinite(rtol) and rtol >= 0):
+            raise ParameterError(f"zeno rtol={rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
+        if not (isinstance(max_ratio, (int, float)) and 0.0 < max_ratio <= 1.0):
+            raise ParameterError(f"zeno max_ratio={max_ratio!r} must lie in (0, 1]")
         self.window = int(window)
         self.rtol = float(rtol)
         self.max_ratio = float(max_ratio)
@@ -48,10 +62,11 @@ class ZenoDetector:
         if min(dts) <= 0.0:
             return None
         ratios = [b / a for a, b in zip(dts[:-1], dts[1:])]
-        mean = sum(ratios) / len(ratios)
         if not (0.0 < max(ratios) < self.max_ratio):
             return None
-        if (max(ratios) - min(ratios)) > self.rtol * mean:
+        deficits = [1.0 - r for r in ratios]
+        mean = sum(deficits) / len(deficits)
+        if (max(deficits) - min(deficits)) > self.rtol * mean:
             return None
         r = ratios[-1]
         self.ratio = r

@@ -145,7 +145,7 @@ def check_step(model, dt: float, h_max: float = 4.0, scheme=None) -> dict:
 def _positive_int(name, value):
     try:
         iv = int(value)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: inf
         raise ParameterError(f"{name}={value!r} must be a positive integer") from exc
     if iv != value or iv <= 0:
         raise ParameterError(f"{name}={value!r} must be a positive integer")

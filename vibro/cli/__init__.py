@@ -10,8 +10,9 @@ import argparse
 import importlib
 import pkgutil
 import sys
+import warnings
 
-from hybrid.errors import VibroError
+from hybrid.errors import VibroError, VibroWarning
 from vibro import __version__
 
 
@@ -45,7 +46,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        status = args.func(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", VibroWarning)
+            previous = warnings.showwarning
+
+            def one_line(message, category, filename, lineno, file=None, line=None):
+                if issubclass(category, VibroWarning):  # ours: one line, no source location
+                    print(f"vibro {args.command}: warning: {message}", file=sys.stderr)
+                else:
+                    previous(message, category, filename, lineno, file, line)
+
+            warnings.showwarning = one_line
+            status = args.func(args)
     except VibroError as exc:
         print(f"vibro {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -33,7 +33,10 @@ def register(subparsers) -> None:
     p.add_argument("--t-end", type=float, default=60.0, dest="t_end", help="final time (default 60)")
     p.add_argument("--backend", choices=["heyoka", "scipy"], default="heyoka")
     p.add_argument("--rtol", type=float, default=None, help="tolerance (heyoka: machine eps; scipy: 1e-10)")
-    p.add_argument("--max-impacts", type=int, default=1_000_000, dest="max_impacts")
+    p.add_argument("--max-impacts", type=int, default=1_000_000, dest="max_impacts",
+                   help="stop after this many impacts (default 1e6; bounded by the log's memory)")
+    p.add_argument("--max-steps", type=int, default=10_000_000, dest="max_steps",
+                   help="stop after this many integration steps (default 1e7), so a huge --t-end stays bounded")
     p.add_argument("--out", default=None, metavar="FILE.csv", help="write the impact log here (atomically)")
     p.add_argument("--rows", type=int, default=6, help="table rows per comparison (default 6)")
     p.set_defaults(func=run)
@@ -115,7 +118,8 @@ def comparison_tables(model, df, rows: int = 6) -> tuple[str, dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``vibro orbit``; return 0 on success, 1 when the orbit stopped early (Zeno, chattering, failure)."""
+    """Run ``vibro orbit``; return 0 on success, 1 when the orbit stopped early (Zeno, chattering, max_steps, a
+    missed impact that left the admissible set, failure)."""
     from averaging.quadrature import period
     from hybrid.deterministic import simulate_orbit
     from hybrid.io import write_csv_atomically
@@ -131,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     model = model_from_args(args)
     model.restitution.validate()
     res = simulate_orbit(model, (args.x0, args.v0), args.t_end, backend=args.backend, rtol=args.rtol,
-                         max_impacts=args.max_impacts)
+                         max_impacts=args.max_impacts, max_steps=args.max_steps)
     df = res.to_pandas()
     params = " ".join(f"{k}={v:g}" for k, v in model.params.items())
     print(f"vibro orbit: {model.name} {params}, restitution {model.restitution.spec()}, backend {res.backend}")

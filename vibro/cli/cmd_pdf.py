@@ -41,6 +41,12 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+_MAX_POINTS = 10_000_000  # stationary_density's own limit
+_BYTES_PER_POINT = 8 * 12  # the output arrays, the jump chain's grid arrays and the CSV text, about
+_MAX_JOINT_CELLS = 10_000**2
+_BYTES_PER_CELL = 8 * 8 + 60  # meshgrid, energies, density, and one CSV line
+
+
 def _csv(columns: dict) -> str:
     import numpy as np
 
@@ -63,8 +69,15 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--h-max {args.h_max!r} must be a finite positive energy")
     if args.points < 3:
         raise ParameterError(f"--points {args.points} must be at least 3")
+    if args.points > _MAX_POINTS:
+        raise ParameterError(f"--points {args.points} needs about {args.points * _BYTES_PER_POINT / 2**30:.3g} GiB "
+                             f"(~{_BYTES_PER_POINT} bytes per point); use at most {_MAX_POINTS}")
     if args.joint is not None and args.joint_points < 2:
         raise ParameterError(f"--joint-points {args.joint_points} must be at least 2")
+    if args.joint is not None and args.joint_points**2 > _MAX_JOINT_CELLS:
+        raise ParameterError(f"--joint-points {args.joint_points} makes a {args.joint_points}^2 grid needing about "
+                             f"{args.joint_points**2 * _BYTES_PER_CELL / 2**30:.3g} GiB plus a CSV line per cell; use "
+                             f"at most {int(_MAX_JOINT_CELLS**0.5)}")
     model = model_from_args(args)
     if args.equations is not None:
         from averaging import averaging_equations

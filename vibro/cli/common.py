@@ -82,10 +82,21 @@ def model_from_args(args: argparse.Namespace):
 
     Parameters not given keep the model's defaults.
     """
+    from hybrid.errors import VibroError
     from models import parse_restitution
 
     law = parse_restitution(args.restitution) if args.restitution else None
-    model = load_model_class(args.model)()
+    cls = load_model_class(args.model)
+    try:
+        model = cls()
+    except VibroError:
+        raise
+    except TypeError as exc:  # a constructor with required arguments, or a body with a type error
+        raise ParameterError(f"model class {cls.__name__} cannot be built without arguments ({exc}); give its "
+                             "parameters defaults and set them with --param NAME=VALUE") from exc
+    except Exception as exc:  # the user's constructor failed: report it, do not trace back
+        raise ParameterError(f"model class {cls.__name__}() raised {type(exc).__name__}: "
+                             f"{str(exc).splitlines()[0] if str(exc) else ''}") from exc
     if law is not None:
         model = model.with_restitution(law)
     params = parse_params(args.param)

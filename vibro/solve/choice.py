@@ -63,11 +63,22 @@ class Choice:
         return "\n".join(s)
 
 
+MIN_TOL = 1e-10
+"""Smallest L1 tolerance accepted: the densities themselves are accurate to about 1e-12, and Monte Carlo cost
+estimates (paths ~ 1 / tol**2) overflow long before."""
+
+
 def check_request(tol, max_cost) -> None:
-    if not (0.0 < tol < 2.0):
-        raise ParameterError(f"tol={tol!r}: an L1 distance between densities lies in (0, 2); use e.g. tol=0.02")
-    if not max_cost > 0:
-        raise ParameterError(f"max_cost={max_cost!r} must be a positive wall time in seconds, e.g. max_cost=600")
+    """Refuse a tolerance outside [MIN_TOL, 2) or a budget that is not a finite positive time."""
+    import numpy as np
+
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or \
+            not (MIN_TOL <= tol < 2.0):
+        raise ParameterError(f"tol={tol!r}: an L1 distance between densities lies in (0, 2), and below "
+                             f"{MIN_TOL:g} double precision cannot deliver it; use e.g. tol=0.02")
+    if isinstance(max_cost, bool) or not isinstance(max_cost, (int, float, np.integer, np.floating)) or \
+            not (0 < max_cost < np.inf):
+        raise ParameterError(f"max_cost={max_cost!r} must be a finite positive wall time in seconds, e.g. 600")
 
 
 def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Diagnostics | None = None,
