@@ -27,3 +27,15 @@ class NormalisationError(VibroError):
 
 class StepSizeError(VibroError):
     """A time step is so large that a path could jump across the gap between the barriers."""
+
+
+class CheckpointError(ParameterError):
+    """A checkpoint cannot be used: unreadable, edited (checksum), or written by another run (fingerprint)."""
+
+
+class VibroWarning(UserWarning):
+    """Base class of the warnings of this package: the result is valid but needs the user's attention."""
+
+
+class HistogramRangeWarning(VibroWarning):
+    """More than a small share of the samples fell outside a histogram's range (they are counted, not binned)."""
