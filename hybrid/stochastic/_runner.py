@@ -489,8 +489,8 @@ def _refuse_bad_e(model, n_bad: int, v: float, e: float, where: str) -> None:
     """Refuse a run in which the law gave e outside (0, 1] at an impact (the kernel checks every impact)."""
     if n_bad:
         raise RestitutionError(
-            f"restitution law {model.restitution!r} gave e({v:.6g}) = {e!r}, outside (0, 1], at {n_bad} "
-            f"impact(s) {where} (a law is only validated on a grid of speeds beforehand); make it return "
+            f"restitution law {model.restitution!r} gave e({float(v):.6g}) = {float(e)!r}, outside (0, 1], at "
+            f"{n_bad} impact(s) {where} (a law is only validated on a grid of speeds beforehand); make it return "
             "0 < e <= 1 at every impact speed"
         )
 
