@@ -207,7 +207,9 @@ def _check_noise(model, h_max: float = 4.0) -> None:
 
     s2 = sp.sympify(model.substitute(model.diffusion_squared))
     if s2.has(sp.I) or any(isinstance(a, sp.Number) and not a.is_real for a in sp.preorder_traversal(s2)):
-        raise ParameterError(f"the noise gives sigma^2 = {s2}, which is complex; noise intensities must be real and >= 0")
+        raise ParameterError(
+            f"the noise gives sigma^2 = {s2}, which is complex; noise intensities must be real and >= 0"
+        )
     # on the states a path visits: the gap (or the turning points at h_max) times |y| <= 2 sqrt(2 h_max)
     left, right = model.barriers
     if np.isfinite(left) and np.isfinite(right):
