@@ -35,3 +35,11 @@ class VibroWarning(UserWarning):
 
 class TruncationWarning(VibroWarning):
     """A result is computed on a truncated range that cuts off a noticeable part of the probability mass."""
+
+
+class CheckpointError(ParameterError):
+    """A checkpoint cannot be used: unreadable, edited (checksum), or written by another run (fingerprint)."""
+
+
+class HistogramRangeWarning(VibroWarning):
+    """More than a small share of the samples fell outside a histogram's range (they are counted, not binned)."""

@@ -484,9 +484,13 @@ def test_cli_output_and_summary(tmp_path, capsys):
     import pandas as pd
 
     df = pd.read_csv(out)
-    assert list(df.columns) == ["H_lo", "H_hi", "count", "density"] and len(df) == 400
-    assert (df.density * (df.H_hi - df.H_lo)).sum() == pytest.approx(1.0)
-    assert len(pd.read_csv(joint)) == 120
+    # 400 bins between the underflow (H < 0) and overflow (H > h_max) rows; the density is normalised by every sample
+    assert list(df.columns) == ["H_lo", "H_hi", "count", "density"] and len(df) == 402
+    inside = df.iloc[1:-1]
+    share = inside["count"].sum() / df["count"].sum()
+    assert (inside.density * (inside.H_hi - inside.H_lo)).sum() == pytest.approx(share)
+    assert df["count"].sum() == 16 * 18000
+    assert len(pd.read_csv(joint)) == 121  # 10 x 12 cells and the row of samples outside the window
     text = capsys.readouterr().out
     for key in ("M path-steps/s", "E[H]", "P(H < G(delta))", "impacts/time", "±"):
         assert key in text

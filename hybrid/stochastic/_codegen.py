@@ -30,8 +30,9 @@ from hybrid.automaton import real_symbol
 from hybrid.errors import ModelError, RestitutionError
 
 from . import _rng
+from ._statistics import COUNTS, SUMS
 
-TEMPLATE_VERSION = "6"
+TEMPLATE_VERSION = "7"
 _X, _Y = real_symbol("x"), real_symbol("y")
 _V = real_symbol("v")
 
@@ -91,15 +92,21 @@ class Emitter:
 
     # ------------------------------------------------------------------ impacts
     def _impact(self, side: str, speed: str, record: bool) -> str:
-        lines = [f"_v = {speed}", f"_e = {self.law_code}"]
+        # e is checked at every impact (a callable law is only validated on a grid beforehand); the first bad value
+        # is kept so that the runner can name the speed. NaN fails the test too.
+        lines = [f"_v = {speed}", f"_e = {self.law_code}", "if not (_e > 0.0 and _e <= 1.0):",
+                 "    if bad_e == 0:", "        bad_v = _v", "        bad_ev = _e", "    bad_e += 1"]
         if record:  # only after burn-in (the flag rec)
+            # the crossing speed can be <= 0 with EM (the in-step velocity turned before the wall): underflow bin
             lines += [
                 "if rec:",
                 f"    n_i{side} += 1",
                 "    s_iv += _v",
                 "    _vb = _v * v_scale",
-                "    if _vb < vbins:",
-                "        vh[k, int(_vb)] += 1",
+                "    if _vb >= 0.0 and _vb <= vbins:",
+                "        vh[k, min(int(_vb), vbins - 1)] += 1",
+                "    elif _vb < 0.0:",
+                "        v_under += 1",
                 "    else:",
                 "        v_over += 1",
             ]
@@ -264,6 +271,11 @@ def run_chunks(states, npaths, n_burn, n_samp, stride, dt, x0, y0, prm, rprm, wl
         viol = 0
         stuck = 0
         nonfinite = 0
+        h_under = 0
+        v_under = 0
+        bad_e = 0
+        bad_v = 0.0
+        bad_ev = 0.0
         s_h = 0.0
         s_x2 = 0.0
         s_y2 = 0.0
@@ -311,9 +323,12 @@ def run_chunks(states, npaths, n_burn, n_samp, stride, dt, x0, y0, prm, rprm, wl
                     n_samples += 1
                     if H < g_bar:
                         n_below += 1
+                    # every index is provably in range: 0 <= hb <= hbins, and the last bin is closed on the right
                     hb = H * h_scale
-                    if hb >= 0.0 and hb < hbins:
-                        hist[k, int(hb)] += 1
+                    if hb >= 0.0 and hb <= hbins:
+                        hist[k, min(int(hb), hbins - 1)] += 1
+                    elif hb < 0.0:
+                        h_under += 1
                     else:
                         h_over += 1
                         if H != H:
@@ -322,8 +337,8 @@ def run_chunks(states, npaths, n_burn, n_samp, stride, dt, x0, y0, prm, rprm, wl
                     for _l in range(nl):
                         bx = (xs[_l] - xlo) * x_scale
                         by = (ys[_l] - ylo) * y_scale
-                        if bx >= 0.0 and bx < nx and by >= 0.0 and by < ny:
-                            xyh[k, int(by), int(bx)] += 1
+                        if bx >= 0.0 and bx <= nx and by >= 0.0 and by <= ny:
+                            xyh[k, min(int(by), ny - 1), min(int(bx), nx - 1)] += 1
                         else:
                             xy_out += 1
         cnt[k, 0] = n_samples
@@ -336,15 +351,23 @@ def run_chunks(states, npaths, n_burn, n_samp, stride, dt, x0, y0, prm, rprm, wl
         cnt[k, 7] = viol
         cnt[k, 8] = stuck
         cnt[k, 9] = nonfinite
+        cnt[k, 10] = h_under
+        cnt[k, 11] = v_under
+        cnt[k, 12] = bad_e
         sm[k, 0] = s_h
         sm[k, 1] = s_x2
         sm[k, 2] = s_y2
         sm[k, 3] = s_iv
+        sm[k, 4] = bad_v
+        sm[k, 5] = bad_ev
 
 
 @nb.njit(cache=CACHE)
-def integrate_normals(x0, y0, xis, dt, prm, rprm, wl, wr):
-    """Paths driven by given standard normals ``xis`` (paths, steps): final (x, y) per path, no statistics."""
+def integrate_normals(x0, y0, xis, dt, prm, rprm, wl, wr, bad):
+    """Paths driven by given standard normals ``xis`` (paths, steps): final (x, y) per path, no statistics.
+
+    ``bad`` (3 floats) receives the number of impacts with e outside (0, 1], the first such speed and e.
+    """
     npath = xis.shape[0]
     nstep = xis.shape[1]
     out = np.empty((npath, 2))
@@ -352,6 +375,9 @@ def integrate_normals(x0, y0, xis, dt, prm, rprm, wl, wr):
     hdt = 0.5 * dt
     stuck = 0
     viol = 0
+    bad_e = 0
+    bad_v = 0.0
+    bad_ev = 0.0
 {unpack}
 {preamble}
     for _path in range(npath):
@@ -363,18 +389,27 @@ def integrate_normals(x0, y0, xis, dt, prm, rprm, wl, wr):
 {step_i}
         out[_path, 0] = x
         out[_path, 1] = y
+    bad[0] = bad_e
+    bad[1] = bad_v
+    bad[2] = bad_ev
     return out
 
 
 @nb.njit(cache=CACHE)
-def record_paths(state, npath, nstep, every, dt, x0, y0, prm, rprm, wl, wr, zx, zk, zf):
-    """A few stored paths: (x, y) every ``every`` steps, drawing from one RNG stream ``state`` (updated)."""
+def record_paths(state, npath, nstep, every, dt, x0, y0, prm, rprm, wl, wr, zx, zk, zf, bad):
+    """A few stored paths: (x, y) every ``every`` steps, drawing from one RNG stream ``state`` (updated).
+
+    ``bad`` (3 floats) receives the number of impacts with e outside (0, 1], the first such speed and e.
+    """
     nrec = nstep // every + 1
     out = np.empty((npath, nrec, 2))
     sdt = math.sqrt(dt)
     hdt = 0.5 * dt
     stuck = 0
     viol = 0
+    bad_e = 0
+    bad_v = 0.0
+    bad_ev = 0.0
     s0 = state[0]
     s1 = state[1]
     s2 = state[2]
@@ -397,6 +432,9 @@ def record_paths(state, npath, nstep, every, dt, x0, y0, prm, rprm, wl, wr, zx, 
     state[1] = s1
     state[2] = s2
     state[3] = s3
+    bad[0] = bad_e
+    bad[1] = bad_v
+    bad[2] = bad_ev
     return out
 '''
 
@@ -412,6 +450,7 @@ class Kernel:
     scheme: str
     source: str
     compile_time: float = float("nan")
+    identity: dict = field(default_factory=dict)
 
     @property
     def run_chunks(self):
@@ -504,6 +543,78 @@ def generate_source(model, scheme, cache: bool = True) -> tuple[str, tuple[float
     return src, law_values, user_law
 
 
+def _feed(obj, parts: list, depth: int, seen: set) -> bool:
+    """Append a stable description of ``obj`` to ``parts``; False when it holds something that cannot be described."""
+    if depth > 8:
+        return False
+    if obj is None or isinstance(obj, (bool, int, str, bytes)):
+        parts.append(repr(obj))
+        return True
+    if isinstance(obj, float):
+        parts.append(float.hex(obj))
+        return True
+    if isinstance(obj, complex):
+        parts.append(f"{obj.real.hex()}+{obj.imag.hex()}j")
+        return True
+    if isinstance(obj, np.generic):
+        return _feed(obj.item(), parts, depth + 1, seen)
+    if isinstance(obj, np.ndarray):  # numba freezes global arrays into the machine code
+        parts.append(f"{obj.dtype.str}{obj.shape}{hashlib.sha256(np.ascontiguousarray(obj).tobytes()).hexdigest()}")
+        return True
+    if isinstance(obj, tuple):
+        parts.append(f"tuple{len(obj)}")
+        return all(_feed(o, parts, depth + 1, seen) for o in obj)
+    if isinstance(obj, types.ModuleType):
+        parts.append(f"module {obj.__name__}")
+        return True
+    if isinstance(obj, types.BuiltinFunctionType):
+        parts.append(f"builtin {getattr(obj, '__module__', '')}.{obj.__qualname__}")
+        return True
+    if isinstance(obj, types.CodeType):
+        parts += [obj.co_code.hex(), repr(obj.co_names), repr(obj.co_varnames)]
+        return all(_feed(c, parts, depth + 1, seen) for c in obj.co_consts)
+    obj = getattr(obj, "py_func", obj)  # a numba dispatcher: its Python function
+    if isinstance(obj, types.FunctionType):
+        if id(obj) in seen:
+            parts.append(f"recursive {obj.__qualname__}")
+            return True
+        seen.add(id(obj))
+        if not _feed(obj.__code__, parts, depth + 1, seen) or not _feed(obj.__defaults__, parts, depth + 1, seen):
+            return False
+        for cell in obj.__closure__ or ():
+            if not _feed(cell.cell_contents, parts, depth + 1, seen):
+                return False
+        names, stack = set(), [obj.__code__]
+        while stack:  # global names used by the function and its nested code (comprehensions, lambdas)
+            code = stack.pop()
+            names.update(code.co_names)
+            stack += [c for c in code.co_consts if isinstance(c, types.CodeType)]
+        for name in sorted(names):
+            if name in obj.__globals__:
+                parts.append(f"global {name}")
+                if not _feed(obj.__globals__[name], parts, depth + 1, seen):
+                    return False
+        return True
+    return False
+
+
+def callable_digest(fn) -> str | None:
+    """A hash of a restitution callable: bytecode, constants, defaults, closure and the globals it reads.
+
+    None when it reads something that cannot be hashed reliably (an arbitrary object whose state may change):
+    such a law cannot identify a checkpoint.
+
+    Examples
+    --------
+    >>> callable_digest(lambda v: 0.9) == callable_digest(lambda v: 0.9), callable_digest(lambda v: 0.8) is None
+    (True, False)
+    """
+    parts: list = []
+    if not _feed(fn, parts, 0, set()):
+        return None
+    return hashlib.sha256("\x00".join(parts).encode()).hexdigest()[:32]
+
+
 _LOADED: dict[str, types.ModuleType] = {}
 _USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused
 _RNG_HASH = hashlib.sha256(inspect.getsource(_rng).encode()).hexdigest()[:8]
@@ -531,7 +642,11 @@ def load_source(name: str, src: str, user_law=None) -> tuple[types.ModuleType, P
     try:
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / f"{name}.py"
-        if not path.exists() or path.read_text() != src:
+        try:
+            current = path.read_text() if path.exists() else None
+        except (OSError, ValueError):  # unreadable or not UTF-8: a corrupt entry is rewritten
+            current = None
+        if current != src:
             tmp = path.with_suffix(f".tmp{os.getpid()}")
             tmp.write_text(src)
             os.replace(tmp, path)
@@ -543,8 +658,27 @@ def load_source(name: str, src: str, user_law=None) -> tuple[types.ModuleType, P
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
+    _rebuild_on_corrupt_cache(module)
     _LOADED[name] = module
     return module, path
+
+
+def _rebuild_on_corrupt_cache(module) -> None:
+    """Make a corrupt numba cache entry (index or machine code) a cache miss: compiled again and overwritten."""
+    for fname in ("run_chunks", "integrate_normals", "record_paths"):
+        cache = getattr(getattr(module, fname, None), "_cache", None)
+        load = getattr(cache, "load_overload", None)
+        if load is None or not hasattr(cache, "flush"):
+            continue
+
+        def safe(sig, target_context, _load=load, _cache=cache):
+            try:
+                return _load(sig, target_context)
+            except Exception:  # unpickling garbage raises many types
+                _cache.flush()  # an empty index: numba compiles and saves a fresh entry
+                return None
+
+        cache.load_overload = safe
 
 
 def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel:
@@ -568,7 +702,14 @@ def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel
         _USER_LAWS.setdefault(id(fn), fn)
         name += f"_law{id(fn):x}"
     module, path = load_source(name, src, user_law)
-    kern = Kernel(module, path, tuple(model.params), law_values, scheme.name, src)
+    # what identifies the computation (for checkpoints): the source (not the numba version: a resume after an
+    # upgrade is allowed), the law's numbers in full precision, and a callable law's code
+    identity = {
+        "kernel": hashlib.sha256((src + _RNG_HASH).encode()).hexdigest()[:32],
+        "law": [float.hex(v) for v in law_values] if user_law is None
+        else callable_digest(model.restitution.callable),
+    }
+    kern = Kernel(module, path, tuple(model.params), law_values, scheme.name, src, identity=identity)
     if warm:
         warm_up(kern, model)
     kern.compile_time = time.perf_counter() - t0
@@ -584,5 +725,5 @@ def warm_up(kern: Kernel, model) -> None:
     kern.run_chunks(
         np.zeros((0, 4), np.uint64), np.zeros(0, np.int64), 0, 0, 1, 1e-3, 0.0, 0.0, prm, rprm, -1.0, 1.0,
         zx, zk, zf, 1.0, 1, 1.0, 0.0, 1.0, 1, 0.0, 1.0, 1, False, 1.0, 1,
-        z2, np.zeros((0, 1, 1), np.int64), z2, np.zeros((0, 10), np.int64), np.zeros((0, 4)),
+        z2, np.zeros((0, 1, 1), np.int64), z2, np.zeros((0, len(COUNTS)), np.int64), np.zeros((0, len(SUMS))),
     )

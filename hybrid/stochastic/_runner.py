@@ -9,6 +9,7 @@ and across a checkpoint and resume.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -21,7 +22,16 @@ import numba as nb
 import numpy as np
 
 from hybrid.automaton import real_symbol
-from hybrid.errors import ModelError, ParameterError, StepSizeError
+from hybrid.errors import (
+    CheckpointError,
+    HistogramRangeWarning,
+    ModelError,
+    ParameterError,
+    RestitutionError,
+    StepSizeError,
+    VibroError,
+    VibroWarning,
+)
 from hybrid.io import atomic_write
 
 from . import _codegen, _rng
@@ -29,13 +39,24 @@ from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
 CHECKPOINT_FILE = "mc_checkpoint.npz"
+CHECKPOINT_FORMAT = 2
+"""Version of the checkpoint layout (2: per-chunk underflow and restitution counts, run identity, checksum)."""
+
+MAX_PATH_STEPS = 1e13
+"""Default refusal threshold of :func:`simulate_ensemble` for paths x steps (about a day on a large node)."""
+
+MAX_MEMORY = 4e9
+"""Default refusal threshold (bytes) of :func:`simulate_ensemble` for the histograms held at once."""
+
+OUTSIDE_WARN = 1e-3
+"""Share of the samples outside a histogram's range above which :class:`HistogramRangeWarning` is raised."""
 
 
-class StepSizeWarning(UserWarning):
+class StepSizeWarning(VibroWarning):
     """The step is legal but coarse: the result carries a visible discretisation bias."""
 
 
-class ChatteringWarning(UserWarning):
+class ChatteringWarning(VibroWarning):
     """Impacts happen on a sizeable share of the steps: the paths chatter against a wall at the step scale."""
 
 
@@ -152,6 +173,16 @@ def _positive_int(name, value):
     return iv
 
 
+def _as_x0(x0) -> tuple[float, float]:
+    """``x0`` as a pair of floats, or a one-line :class:`ParameterError` (a scalar, a string, complex values)."""
+    try:
+        if isinstance(x0, (str, bytes)) or any(isinstance(v, (complex, np.complexfloating)) for v in x0):
+            raise TypeError
+        return tuple(float(v) for v in x0)
+    except (TypeError, ValueError):
+        raise ParameterError(f"x0={x0!r} must be two finite numbers (position, velocity), e.g. x0=(0.0, 0.0)") from None
+
+
 def _check_x0(model, x0) -> None:
     if len(x0) != 2 or not all(math.isfinite(v) for v in x0):
         raise ParameterError(f"x0={x0!r} must be two finite numbers (position, velocity)")
@@ -162,6 +193,77 @@ def _check_x0(model, x0) -> None:
     if (x0[0] == right and x0[1] > 0) or (x0[0] == left and x0[1] < 0):
         raise ParameterError(
             f"x0={tuple(x0)!r} starts on a barrier moving outwards; give a velocity of 0 or one pointing into the gap"
+        )
+
+
+def _check_noise(model, h_max: float = 4.0) -> None:
+    """Refuse a noise intensity that makes sigma**2 complex or negative (the kernel takes its square root)."""
+    import sympy as sp
+
+    X, Y = real_symbol("x"), real_symbol("y")
+    s2 = sp.sympify(model.substitute(model.diffusion_squared))
+    if s2.has(sp.I) or any(isinstance(a, sp.Number) and not a.is_real for a in sp.preorder_traversal(s2)):
+        raise ParameterError(
+            f"the noise gives sigma^2 = {s2}, which is complex; noise intensities must be real and >= 0"
+        )
+    # on the states a path visits: the gap (or the turning points at h_max) times |y| <= 2 sqrt(2 h_max)
+    left, right = model.barriers
+    if np.isfinite(left) and np.isfinite(right):
+        lo, hi = left, right
+    else:
+        amp = float(np.max(np.abs(model.turning_points(h_max))))
+        lo, hi = (left if np.isfinite(left) else -amp), (right if np.isfinite(right) else amp)
+    vmax = 2.0 * math.sqrt(2.0 * h_max)
+    xs = np.linspace(lo, hi, 41)
+    ys = np.linspace(-vmax, vmax, 41)
+    xx, yy = np.meshgrid(xs, ys)
+    with np.errstate(all="ignore"):
+        try:
+            val = np.broadcast_to(np.asarray(sp.lambdify((X, Y), s2, "numpy")(xx, yy), dtype=float), xx.shape)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"the noise gives sigma^2 = {s2}, which is not a real number ({exc})") from None
+    bad = ~(val >= 0.0)
+    if bad.any():
+        i = np.flatnonzero(bad.ravel())[0]
+        raise ParameterError(
+            f"the noise gives sigma^2 = {val.ravel()[i]:g} at x={xx.ravel()[i]:g}, y={yy.ravel()[i]:g} "
+            f"(sigma^2 = {s2}); it must be >= 0: use noise intensities >= 0"
+        )
+
+
+def _bin_scale(lo: float, hi: float, n: int) -> float:
+    """n / (hi - lo), lowered by ulps until (hi - lo) * scale <= n: a sample exactly at hi (a wall) is binned.
+
+    The kernel computes (v - lo) * scale, monotone in v, so every v <= hi maps into [0, n] and, the last bin being
+    closed, into a bin.
+    """
+    scale = n / (hi - lo)
+    while (hi - lo) * scale > n:
+        scale = float(np.nextafter(scale, 0.0))
+    return float(scale)
+
+
+def _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_memory) -> None:
+    """Refuse, with the estimate, a run beyond ``max_path_steps`` path-steps or ``max_memory`` bytes of histograms."""
+    for name, val in (("max_path_steps", max_path_steps), ("max_memory", max_memory)):
+        if isinstance(val, bool) or not isinstance(val, (int, float, np.integer, np.floating)) or not val > 0:
+            raise ParameterError(f"{name}={val!r} must be a positive number")
+    steps = float(t_end) / float(dt)  # in floats: t_end / dt may exceed every integer type (or be inf)
+    work = paths * steps
+    if not work <= max_path_steps:
+        raise ParameterError(
+            f"the run needs {work:.3g} path-steps ({paths} paths x {steps:.3g} steps of dt={dt:g} up to "
+            f"t_end={t_end:g}), above the limit {max_path_steps:.3g}; lower paths or t_end, raise dt, or raise "
+            "the limit (max_path_steps=, --max-path-steps)"
+        )
+    cells = float(bins) + float(v_bins) + (float(xy_bins[0]) * float(xy_bins[1]) if xy_bins is not None else 0.0)
+    # int64 histograms: one set per running thread, the running totals, one buffered result and a merge copy
+    need = 8.0 * cells * (nb.get_num_threads() + 3)
+    if not need <= max_memory:
+        raise ParameterError(
+            f"the histograms need about {need / 1e9:.3g} GB ({cells:.3g} bins x 8 bytes x "
+            f"{nb.get_num_threads() + 3} copies), above the limit {max_memory / 1e9:.3g} GB; lower bins, xy_bins "
+            "or v_bins, or raise the limit (max_memory=, --max-memory-gb)"
         )
 
 
@@ -177,7 +279,7 @@ def default_chunk_paths(paths: int) -> int:
 
 
 def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride, chunk_paths,
-              v_bins, v_max, x0) -> dict:
+              v_bins, v_max, x0, max_path_steps=MAX_PATH_STEPS, max_memory=MAX_MEMORY) -> dict:
     real = (int, float, np.integer, np.floating)
     for name, val in (("dt", dt), ("t_end", t_end), ("h_max", h_max)):
         if not (isinstance(val, real) and math.isfinite(val) and val > 0):
@@ -193,6 +295,11 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
     chunk_paths = default_chunk_paths(paths) if chunk_paths is None else _positive_int("chunk_paths", chunk_paths)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed={seed!r} must be a non-negative integer (randomness only from explicit seeds)")
+    if xy_bins is not None:
+        xy_bins = [_positive_int("xy_bins", b) for b in xy_bins]
+        if len(xy_bins) != 2:
+            raise ParameterError(f"xy_bins={xy_bins!r} must be two positive integers (nx, ny)")
+    _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_memory)
     n_total = int(round(t_end / dt))
     n_burn = int(round(t_burn / dt))
     n_samp = (n_total - n_burn) // stride
@@ -201,8 +308,6 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
     _check_x0(model, x0)
     left, right = model.barriers
     if xy_bins is not None:
-        nx, ny = (_positive_int("xy_bins", b) for b in xy_bins)
-        xy_bins = [nx, ny]
         if xy_range is None:
             amp = float(np.max(np.abs(model.turning_points(h_max))))
             xr = (left if np.isfinite(left) else -amp, right if np.isfinite(right) else amp)
@@ -249,9 +354,10 @@ class _Job:
         nx, ny = xy if xy is not None else (1, 1)
         self.scalars = dict(
             n_burn=s["n_burn"], n_samp=s["n_samp"], stride=s["stride"], dt=s["dt"], x0=s["x0"][0], y0=s["x0"][1],
-            wl=float(left), wr=float(right), h_scale=s["bins"] / s["h_max"], hbins=s["bins"], g_bar=s["g_barrier"],
-            xlo=float(xlo), x_scale=nx / (xhi - xlo), nx=nx, ylo=float(ylo), y_scale=ny / (yhi - ylo), ny=ny,
-            do_xy=xy is not None, v_scale=s["v_bins"] / s["v_max"], vbins=s["v_bins"],
+            wl=float(left), wr=float(right), h_scale=_bin_scale(0.0, s["h_max"], s["bins"]), hbins=s["bins"],
+            g_bar=s["g_barrier"], xlo=float(xlo), x_scale=_bin_scale(xlo, xhi, nx), nx=nx, ylo=float(ylo),
+            y_scale=_bin_scale(ylo, yhi, ny), ny=ny, do_xy=xy is not None,
+            v_scale=_bin_scale(0.0, s["v_max"], s["v_bins"]), vbins=s["v_bins"],
         )
         self.seed = s["seed"]
         self.n_chunks = s["n_chunks"]
@@ -289,39 +395,131 @@ def _remote_run(job: _Job, ids, states):
 
 
 # ---------------------------------------------------------------------------------------------------- checkpoints
+def _checksum(arrays: dict) -> str:
+    """SHA-256 over every array's name, dtype, shape and bytes: an edited checkpoint (doubled counts) is refused."""
+    h = hashlib.sha256()
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
 def _write_checkpoint(directory: Path, stats: EnsembleStatistics) -> None:
     directory.mkdir(parents=True, exist_ok=True)
     arrays = stats.to_arrays()
+    arrays["format"] = np.array(CHECKPOINT_FORMAT)
+    arrays["checksum"] = np.array(_checksum(arrays))
     # the shared writer: a unique temporary name (ends in .npz, so savez adds nothing), removed on failure
     atomic_write(directory / CHECKPOINT_FILE, lambda tmp: np.savez(tmp, **arrays))
 
 
 _RESUME_KEYS = ("scheme", "dt", "paths", "t_end", "t_burn", "seed", "h_max", "bins", "xy_bins", "xy_range", "stride",
-                "chunk_paths", "v_bins", "v_max", "x0", "model", "fingerprint")
+                "chunk_paths", "v_bins", "v_max", "x0", "model", "fingerprint", "identity")
+_IDENTITY_NAMES = {"kernel": "generated kernel", "law": "restitution law", "params": "model parameters"}
+
+
+def _check_checkpoint_dir(directory: Path) -> None:
+    """Before any work: the checkpoint path must be a directory that can be created and written."""
+    if directory.exists() and not directory.is_dir():
+        raise CheckpointError(f"checkpoint {str(directory)!r} is a file, not a directory; give a directory")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CheckpointError(f"cannot create the checkpoint directory {str(directory)!r} ({exc.strerror or exc})") \
+            from None
 
 
 def _load_checkpoint(directory: Path, settings: dict) -> EnsembleStatistics | None:
     path = directory / CHECKPOINT_FILE
     if not path.exists():
         return None
-    with np.load(path) as d:
-        stats = EnsembleStatistics.from_arrays(dict(d))
+    hint = "delete it or use another --checkpoint directory"
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            arrays = {k: d[k] for k in d.files}
+    except Exception as exc:  # not a zip, truncated, bad member: numpy raises many types
+        raise CheckpointError(f"checkpoint {path} cannot be read ({type(exc).__name__}): it is corrupt; {hint}") \
+            from None
+    stored = str(arrays.pop("checksum", ""))
+    if "format" not in arrays or int(arrays["format"]) != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"checkpoint {path} has an old or unknown format (need {CHECKPOINT_FORMAT}); {hint}")
+    if stored != _checksum(arrays):
+        raise CheckpointError(f"checkpoint {path} fails its checksum (edited or corrupt); {hint}")
+    try:
+        stats = EnsembleStatistics.from_arrays(arrays)
+    except Exception as exc:
+        raise CheckpointError(f"checkpoint {path} is not a valid checkpoint ({type(exc).__name__}); {hint}") from None
     old = json.loads(json.dumps({k: stats.settings.get(k) for k in _RESUME_KEYS}))
     new = json.loads(json.dumps({k: settings.get(k) for k in _RESUME_KEYS}))
-    diff = [k for k in _RESUME_KEYS if old[k] != new[k]]
+    diff = [k for k in _RESUME_KEYS if k != "identity" and old[k] != new[k]]
+    oid, nid = old["identity"] or {}, new["identity"] or {}
+    diff += [_IDENTITY_NAMES.get(k, k) for k in sorted(set(oid) | set(nid)) if oid.get(k) != nid.get(k)]
     if diff:
-        raise ParameterError(
+        raise CheckpointError(
             f"checkpoint {path} was made with other settings ({', '.join(diff)} differ); resume with the same "
             "arguments or use another --checkpoint directory"
         )
     return stats
 
 
+def _outside_warnings(stats: EnsembleStatistics) -> None:
+    """Warn (:class:`HistogramRangeWarning`) for each histogram with more than :data:`OUTSIDE_WARN` outside."""
+    out = stats.outside()
+    for name, d in out.items():
+        if d["fraction"] > OUTSIDE_WARN:
+            hints = {"H": ["H < 0 needs a potential below 0 (the histogram starts at 0)" if d.get("below") else "",
+                           "raise h_max" if d.get("above") else ""],
+                     "xy": ["widen xy_range (or raise h_max)"],
+                     "speed": ["crossing speeds < 0 come from the Euler-Maruyama in-step velocity turning before the "
+                               "wall: reduce dt or use splitting or milstein" if d.get("below") else "",
+                               "raise v_max" if d.get("above") else ""]}[name]
+            detail = ", ".join(f"{d[k]} {k}" for k in ("below", "above") if k in d)
+            warnings.warn(
+                f"{d['fraction']:.3g} of the {d['total']} {name} samples fall outside the {name} histogram "
+                f"({detail or str(d['outside']) + ' outside'}); they are counted, not binned, and its density "
+                f"integrates to {1 - d['fraction']:.4g}: {'; '.join(filter(None, hints))}", HistogramRangeWarning,
+                stacklevel=3,
+            )
+
+
+def _refuse_bad_e(model, n_bad: int, v: float, e: float, where: str) -> None:
+    """Refuse a run in which the law gave e outside (0, 1] at an impact (the kernel checks every impact)."""
+    if n_bad:
+        raise RestitutionError(
+            f"restitution law {model.restitution!r} gave e({float(v):.6g}) = {float(e)!r}, outside (0, 1], at "
+            f"{n_bad} impact(s) {where} (a law is only validated on a grid of speeds beforehand); make it return "
+            "0 < e <= 1 at every impact speed"
+        )
+
+
+def _bad_restitution(model, cnt, sm, ids) -> None:
+    """:func:`_refuse_bad_e` for finished chunks (their count and sum rows)."""
+    n_bad = cnt[:, COUNTS.index("bad_e")]
+    if n_bad.any():
+        row = int(np.flatnonzero(n_bad)[0])
+        _refuse_bad_e(model, int(n_bad.sum()), sm[row, SUMS.index("bad_e_speed")],
+                      sm[row, SUMS.index("bad_e_value")], f"of chunk {int(ids[row])}")
+
+
+def _run_error(model, exc: Exception) -> VibroError:
+    """A one-line error for an exception raised inside the compiled kernel (for example by a callable law)."""
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    if getattr(model.restitution, "callable", None) is not None:
+        return RestitutionError(
+            f"the restitution callable {model.restitution!r} raised {type(exc).__name__}({text!r}) during the run; "
+            "make it return 0 < e <= 1 for every impact speed v without raising"
+        )
+    return ModelError(f"the compiled kernel raised {type(exc).__name__}({text!r}) during the run; check the model "
+                      "expressions at the states the paths reach")
+
+
 # ---------------------------------------------------------------------------------------------------- runner
 def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0, t_burn=200.0, seed=1, h_max=4.0,
                       bins=400, xy_bins=(80, 80), xy_range=None, stride=1, progress=False, checkpoint=None,
                       resume=False, scheduler=None, *, chunk_paths=None, checkpoint_every=4, v_bins=200, v_max=None,
-                      x0=(0.0, 0.0), check_dt=True) -> EnsembleStatistics:
+                      x0=(0.0, 0.0), check_dt=True, max_path_steps=MAX_PATH_STEPS,
+                      max_memory=MAX_MEMORY) -> EnsembleStatistics:
     """Simulate an ensemble of paths of ``model`` and return streaming statistics (no paths are stored).
 
     Parameters
@@ -352,10 +550,22 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         Where chunks run: numba threads in this process (default), or Dask (a LocalCluster for "dask").
     check_dt : bool
         Apply :func:`check_step` (refuse or warn on coarse steps).
+    max_path_steps, max_memory : float
+        Refuse, before starting, a run of more path-steps (default 1e13) or whose histograms need more bytes
+        (default 4e9); the message gives the estimate.
 
     Returns
     -------
     EnsembleStatistics
+        Samples outside a histogram's range are counted (:meth:`EnsembleStatistics.outside`); more than 0.1 %
+        outside gives a :class:`~hybrid.errors.HistogramRangeWarning`.
+
+    Raises
+    ------
+    ParameterError
+        Bad or unbounded settings; :class:`~hybrid.errors.CheckpointError` for an unusable checkpoint.
+    RestitutionError
+        The law gave e outside (0, 1] at an impact, or a callable law raised.
 
     Examples
     --------
@@ -366,9 +576,10 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     0
     """
     sch = get_scheme(scheme)
-    x0 = tuple(float(v) for v in x0)
+    x0 = _as_x0(x0)
     settings = _settings(model, sch, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride,
-                         chunk_paths, v_bins, v_max, x0)
+                         chunk_paths, v_bins, v_max, x0, max_path_steps, max_memory)
+    _check_noise(model, settings["h_max"])
     if check_dt:
         settings["step_rule"] = check_step(model, dt, h_max, sch)
     local = scheduler in (None, "threads", "local")
@@ -378,16 +589,26 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     if resume and checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
     checkpoint_every = _positive_int("checkpoint_every", checkpoint_every)
+    ckdir = Path(checkpoint) if checkpoint is not None else None
+    if ckdir is not None:
+        _check_checkpoint_dir(ckdir)
+        if not resume and (ckdir / CHECKPOINT_FILE).exists():
+            raise ParameterError(f"{ckdir / CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
+    law_fn = getattr(model.restitution, "callable", None)
+    if ckdir is not None and law_fn is not None and _codegen.callable_digest(law_fn) is None:
+        raise CheckpointError(
+            f"the restitution callable {model.restitution!r} reads objects that cannot be fingerprinted, so a "
+            "checkpoint could be resumed with another law; run without a checkpoint or declare the law as an "
+            "expression of v"
+        )
     kern = _codegen.build_kernel(model, sch)
+    settings["identity"] = {**kern.identity, "params": {k: float.hex(float(model.params[k])) for k in kern.param_names}}
     job = _Job(model, kern, settings)
     states = _rng.chunk_states(settings["seed"], settings["n_chunks"])
 
     stats = None
-    ckdir = Path(checkpoint) if checkpoint is not None else None
     if ckdir is not None and resume:
         stats = _load_checkpoint(ckdir, settings)
-    elif ckdir is not None and (ckdir / CHECKPOINT_FILE).exists():
-        raise ParameterError(f"{ckdir / CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
     if stats is None:
         stats = EnsembleStatistics.empty(settings)
     stats.settings.update({k: v for k, v in settings.items() if k not in stats.settings})
@@ -412,8 +633,14 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
             stats.add_chunks(*(np.concatenate(parts) for parts in zip(*buffer)))
             buffer.clear()
 
+    # integer histograms add exactly in any grouping: bound the buffered ones by memory as well as by count
+    hist_bytes = 8 * (settings["bins"] + settings["v_bins"] + (math.prod(settings["xy_bins"]) if settings["xy_bins"]
+                                                               else 0))
+    max_buffer = max(1, min(max(32, stats.done_chunks // 4), (64 << 20) // hist_bytes))
+
     def accept(result):
         nonlocal since
+        _bad_restitution(model, result[5], result[6], result[0])  # before the chunk can reach a checkpoint
         buffer.append(result)
         stats.wall_time = wall0 + time.perf_counter() - t_start
         since += len(result[0])
@@ -423,9 +650,41 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
             flush()
             _write_checkpoint(ckdir, stats)
             since = 0
-        elif len(buffer) >= max(32, stats.done_chunks // 4):
+        elif len(buffer) >= min(max(32, stats.done_chunks // 4), max_buffer):
             flush()
 
+    try:
+        _run_chunks(job, kern, pending, states, local, scheduler, accept, flush, ckdir, stats)
+    except VibroError:
+        raise
+    except Exception as exc:  # raised inside the kernel (a callable law, a math domain error): one line
+        raise _run_error(model, exc) from exc
+    finally:
+        if bar is not None:
+            bar.close()
+    stats.wall_time = wall0 + time.perf_counter() - t_start
+    if ckdir is not None:
+        _write_checkpoint(ckdir, stats)
+    bad = stats.total("nonfinite")
+    if bad:
+        raise ModelError(f"{bad} samples had a non-finite energy: the paths diverged; reduce dt or check the model")
+    _outside_warnings(stats)
+    sampled_steps = stats.paths * settings["n_samp"] * settings["stride"]
+    per_step = stats.impacts / sampled_steps if sampled_steps else 0.0
+    # inelastic collapse needs e < 1; elastic walls at a coarse dt are resolved exactly by the in-step location
+    if per_step > CHATTER_IMPACTS_PER_STEP and not model.restitution.is_elastic:
+        stats.settings["chattering"] = {"impacts_per_step": per_step, "limit": CHATTER_IMPACTS_PER_STEP}
+        warnings.warn(
+            f"chattering: {per_step:.3g} impacts per path-step (limit {CHATTER_IMPACTS_PER_STEP}); paths bounce "
+            f"against a wall on the step scale, so impact rates and wall statistics are not resolved by dt={dt:g}; "
+            "reduce dt until the impact rate stops changing, or treat the sticking phase in the model",
+            ChatteringWarning, stacklevel=2,
+        )
+    return stats
+
+
+def _run_chunks(job, kern, pending, states, local, scheduler, accept, flush, ckdir, stats) -> None:
+    """Run the pending chunks locally or on Dask; on any exit keep every finished chunk in the checkpoint."""
     try:
         if local:
             # one chunk per call of the nogil kernel, numba.get_num_threads() calls at a time
@@ -449,27 +708,6 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         if ckdir is not None and stats.done_chunks:  # keep every finished chunk for --resume
             _write_checkpoint(ckdir, stats)
         raise
-    finally:
-        if bar is not None:
-            bar.close()
-    stats.wall_time = wall0 + time.perf_counter() - t_start
-    if ckdir is not None:
-        _write_checkpoint(ckdir, stats)
-    bad = stats.total("nonfinite")
-    if bad:
-        raise ModelError(f"{bad} samples had a non-finite energy: the paths diverged; reduce dt or check the model")
-    sampled_steps = stats.paths * settings["n_samp"] * settings["stride"]
-    per_step = stats.impacts / sampled_steps if sampled_steps else 0.0
-    # inelastic collapse needs e < 1; elastic walls at a coarse dt are resolved exactly by the in-step location
-    if per_step > CHATTER_IMPACTS_PER_STEP and not model.restitution.is_elastic:
-        stats.settings["chattering"] = {"impacts_per_step": per_step, "limit": CHATTER_IMPACTS_PER_STEP}
-        warnings.warn(
-            f"chattering: {per_step:.3g} impacts per path-step (limit {CHATTER_IMPACTS_PER_STEP}); paths bounce "
-            f"against a wall on the step scale, so impact rates and wall statistics are not resolved by dt={dt:g}; "
-            "reduce dt until the impact rate stops changing, or treat the sticking phase in the model",
-            ChatteringWarning, stacklevel=2,
-        )
-    return stats
 
 
 def _run_dask(job, pending, states, scheduler, accept) -> None:
@@ -518,6 +756,8 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     (1, 2)
     """
     sch = get_scheme(scheme)
+    x0 = _as_x0(x0)
+    _check_noise(model)
     kern = _codegen.build_kernel(model, sch, warm=False)
     z = np.ascontiguousarray(normals, dtype=float)
     if z.ndim != 2:
@@ -525,8 +765,16 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     n = z.shape[0]
     prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
     left, right = model.barriers
-    return kern.integrate_normals(np.full(n, float(x0[0])), np.full(n, float(x0[1])), z, float(dt), prm,
-                                  np.array(kern.law_values, dtype=float), float(left), float(right))
+    bad = np.zeros(3)
+    try:
+        out = kern.integrate_normals(np.full(n, float(x0[0])), np.full(n, float(x0[1])), z, float(dt), prm,
+                                     np.array(kern.law_values, dtype=float), float(left), float(right), bad)
+    except VibroError:
+        raise
+    except Exception as exc:
+        raise _run_error(model, exc) from exc
+    _refuse_bad_e(model, int(bad[0]), bad[1], bad[2], "of the driven paths")
+    return out
 
 
 def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=10, seed=1, x0=(0.0, 0.0),
@@ -554,8 +802,9 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
         raise ParameterError(f"t_end={t_end:g} holds fewer than every={every} steps of dt={dt:g}")
     if paths * (nstep // every + 1) * 2 > 10**7:
         raise ParameterError("too many stored values (> 1e7); raise every or lower paths / t_end")
-    x0 = tuple(float(v) for v in x0)
+    x0 = _as_x0(x0)
     _check_x0(model, x0)
+    _check_noise(model)
     left, right = model.barriers
     if check_dt:
         check_step(model, dt, scheme=sch)
@@ -563,7 +812,14 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     zx, zk, zf = _rng.ziggurat_tables()
     state = _rng.chunk_states(seed, 1)[0].copy()
     prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
-    out = kern.record_paths(state, paths, nstep, every, float(dt), float(x0[0]), float(x0[1]), prm,
-                            np.array(kern.law_values, dtype=float), float(left), float(right), zx, zk, zf)
+    bad = np.zeros(3)
+    try:
+        out = kern.record_paths(state, paths, nstep, every, float(dt), float(x0[0]), float(x0[1]), prm,
+                                np.array(kern.law_values, dtype=float), float(left), float(right), zx, zk, zf, bad)
+    except VibroError:
+        raise
+    except Exception as exc:
+        raise _run_error(model, exc) from exc
+    _refuse_bad_e(model, int(bad[0]), bad[1], bad[2], "of the sampled paths")
     t = np.arange(out.shape[1]) * every * dt
     return t, out[:, :, 0], out[:, :, 1]

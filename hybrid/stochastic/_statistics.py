@@ -20,10 +20,13 @@ from hybrid.errors import ParameterError
 from hybrid.io import atomic_write_text  # noqa: F401  (re-exported by hybrid.stochastic)
 
 # columns of the per-chunk count table
+# (h_under/h_over: H < 0 / H > h_max or NaN; xy_out: outside the (x, y) window; v_under/v_over: crossing speed
+# < 0 / > v_max; bad_e: impacts whose restitution coefficient fell outside (0, 1])
 COUNTS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out", "v_over", "violations", "stuck",
-          "nonfinite")
-# columns of the per-chunk sum table
-SUMS = ("H", "x2", "y2", "impact_speed")
+          "nonfinite", "h_under", "v_under", "bad_e")
+# columns of the per-chunk sum table (bad_e_speed, bad_e_value: the chunk's first impact with a bad e, else 0:
+# NaN would make equal tables compare unequal)
+SUMS = ("H", "x2", "y2", "impact_speed", "bad_e_speed", "bad_e_value")
 
 
 @dataclass(frozen=True)
@@ -210,9 +213,34 @@ class EnsembleStatistics:
     def h_edges(self) -> np.ndarray:
         return np.linspace(0.0, self.settings["h_max"], self.settings["bins"] + 1)
 
+    def _out(self, name: str) -> int:
+        return self.total(name) if len(self.chunk_counts) else 0
+
+    def outside(self) -> dict:
+        """Samples outside each histogram's range: counts, total and fraction, per histogram.
+
+        ``H``: ``below`` (H < 0) and ``above`` (H > h_max, or not finite); ``xy`` (when collected): ``outside`` the
+        (x, y) window; ``speed``: ``below`` (crossing speed < 0, Euler-Maruyama only) and ``above`` v_max. Every
+        sample is in exactly one bin or one of these counts.
+        """
+        out = {}
+        below, above = self._out("h_under"), self._out("h_over")
+        n = int(self.h_counts.sum()) + below + above
+        out["H"] = {"below": below, "above": above, "outside": below + above, "total": n,
+                    "fraction": (below + above) / n if n else 0.0}
+        if self.xy_counts is not None:
+            o = self._out("xy_out")
+            n = int(self.xy_counts.sum()) + o
+            out["xy"] = {"outside": o, "total": n, "fraction": o / n if n else 0.0}
+        below, above = self._out("v_under"), self._out("v_over")
+        n = int(self.v_counts.sum()) + below + above
+        out["speed"] = {"below": below, "above": above, "outside": below + above, "total": n,
+                        "fraction": (below + above) / n if n else 0.0}
+        return out
+
     def h_density(self) -> np.ndarray:
-        """p(H) on the bins, normalised over [0, h_max]."""
-        n = self.h_counts.sum()
+        """p(H) on the bins, normalised by every sample: it integrates to the share inside [0, h_max]."""
+        n = self.outside()["H"]["total"]
         return self.h_counts / (n * np.diff(self.h_edges)) if n else np.zeros(len(self.h_counts))
 
     @property
@@ -224,11 +252,11 @@ class EnsembleStatistics:
         return np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
 
     def xy_density(self) -> np.ndarray | None:
-        """p(x, y), shape (ny, nx), normalised over the histogram range."""
+        """p(x, y), shape (ny, nx), normalised by every sample: it integrates to the share inside the window."""
         if self.xy_counts is None:
             return None
         xe, ye = self.xy_edges
-        n = self.xy_counts.sum()
+        n = self.outside()["xy"]["total"]
         area = np.outer(np.diff(ye), np.diff(xe))
         return self.xy_counts / (n * area) if n else np.zeros_like(area)
 
@@ -237,8 +265,8 @@ class EnsembleStatistics:
         return np.linspace(0.0, self.settings["v_max"], self.settings["v_bins"] + 1)
 
     def v_density(self) -> np.ndarray:
-        """Density of the impact speeds |y-| on the bins of [0, v_max] (normalised over that range)."""
-        n = self.v_counts.sum()
+        """Density of the impact speeds |y-| on the bins of [0, v_max], normalised by every impact."""
+        n = self.outside()["speed"]["total"]
         return self.v_counts / (n * np.diff(self.v_edges)) if n else np.zeros(len(self.v_counts))
 
     # ------------------------------------------------------------------ estimates
@@ -298,18 +326,31 @@ class EnsembleStatistics:
 
     # ------------------------------------------------------------------ output
     def to_pandas(self):
-        """The H histogram as a DataFrame with columns H_lo, H_hi, count, density."""
+        """The H histogram as a DataFrame with columns H_lo, H_hi, count, density.
+
+        The first row (H_lo = -inf, H_hi = 0) counts the samples with H < 0, the last (H_lo = h_max, H_hi = inf)
+        those above h_max; their density is NaN. The density integrates to the share of samples on the bins.
+        """
         import pandas as pd
 
         e = self.h_edges
-        return pd.DataFrame({"H_lo": e[:-1], "H_hi": e[1:], "count": self.h_counts, "density": self.h_density()})
+        out = self.outside()["H"]
+        inf = float("inf")
+        return pd.DataFrame({
+            "H_lo": np.concatenate([[-inf], e[:-1], [e[-1]]]), "H_hi": np.concatenate([[e[0]], e[1:], [inf]]),
+            "count": np.concatenate([[out["below"]], self.h_counts, [out["above"]]]),
+            "density": np.concatenate([[np.nan], self.h_density(), [np.nan]]),
+        })
 
     def to_csv(self, path) -> Path:
         """Write :meth:`to_pandas` atomically (full float precision)."""
         return atomic_write_text(path, self.to_pandas().to_csv(index=False, float_format="%.17g"))
 
     def joint_to_pandas(self):
-        """The (x, y) histogram in long form: x_lo, x_hi, y_lo, y_hi, count, density."""
+        """The (x, y) histogram in long form: x_lo, x_hi, y_lo, y_hi, count, density.
+
+        A last row with NaN edges and density counts the samples outside the window.
+        """
         import pandas as pd
 
         if self.xy_counts is None:
@@ -317,9 +358,12 @@ class EnsembleStatistics:
         xe, ye = self.xy_edges
         ny, nx = self.xy_counts.shape
         ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
+        nan = [np.nan]
         return pd.DataFrame({
-            "x_lo": xe[ix.ravel()], "x_hi": xe[ix.ravel() + 1], "y_lo": ye[iy.ravel()], "y_hi": ye[iy.ravel() + 1],
-            "count": self.xy_counts.ravel(), "density": self.xy_density().ravel(),
+            "x_lo": np.concatenate([xe[ix.ravel()], nan]), "x_hi": np.concatenate([xe[ix.ravel() + 1], nan]),
+            "y_lo": np.concatenate([ye[iy.ravel()], nan]), "y_hi": np.concatenate([ye[iy.ravel() + 1], nan]),
+            "count": np.concatenate([self.xy_counts.ravel(), [self.outside()["xy"]["outside"]]]),
+            "density": np.concatenate([self.xy_density().ravel(), nan]),
         })
 
     def summary(self) -> dict:
@@ -329,6 +373,7 @@ class EnsembleStatistics:
         for name in ("mean_energy", "mean_x2", "mean_y2", "prob_below_barrier", "impact_rate"):
             e = getattr(self, name)
             out[name] = {"value": e.value, "ci": e.ci}
+        out["outside_histograms"] = self.outside()
         return out
 
     # ------------------------------------------------------------------ checkpoint form

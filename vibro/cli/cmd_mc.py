@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 
 from hybrid.errors import ParameterError
 from vibro.cli.common import add_model_arguments, model_from_args
@@ -21,7 +22,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "mc", help="Monte Carlo ensemble: histogram of H, moments, impact rate (compiled, parallel, reproducible)",
         description="Simulate an ensemble with a compiled scheme and write the histogram of H as CSV "
-                    "(H_lo,H_hi,count,density; density normalised over [0, h_max]).",
+                    "(H_lo,H_hi,count,density; the first and last rows count the samples below 0 and above h_max, and "
+                    "the density is normalised by every sample).",
     )
     add_model_arguments(p)
     p.add_argument("--scheme", default="milstein", choices=SCHEMES, help="time-stepping scheme")
@@ -44,6 +46,8 @@ def register(subparsers) -> None:
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar (default: when stderr is a terminal)")
     p.add_argument("--summary-json", default=None, help="also write the summary as JSON")
+    p.add_argument("--max-path-steps", type=float, default=1e13, help="refuse runs of more paths x steps")
+    p.add_argument("--max-memory-gb", type=float, default=4.0, help="refuse histograms needing more memory")
     p.set_defaults(func=run)
 
 
@@ -57,16 +61,23 @@ def run(args) -> int:
         target = getattr(args, name)
         if target is not None and not Path(target).resolve().parent.is_dir():
             raise ParameterError(f"--{name.replace('_', '-')} {target!r}: the directory does not exist")
+        if target is not None and Path(target).is_dir():  # found before the run, not after it
+            raise ParameterError(f"--{name.replace('_', '-')} {target!r} is a directory; give a file name")
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
     model = model_from_args(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
-    stats = simulate_ensemble(
-        model, scheme=args.scheme, dt=args.dt, paths=args.paths, t_end=args.t_end, t_burn=args.t_burn,
-        seed=args.seed, h_max=args.h_max, bins=args.bins, xy_bins=tuple(args.xy_bins) if args.joint else None,
-        stride=args.stride, progress=progress, checkpoint=args.checkpoint, resume=args.resume,
-        scheduler=args.scheduler, chunk_paths=args.chunk_paths, checkpoint_every=args.checkpoint_every,
-    )
+    with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
+        warnings.simplefilter("always")
+        stats = simulate_ensemble(
+            model, scheme=args.scheme, dt=args.dt, paths=args.paths, t_end=args.t_end, t_burn=args.t_burn,
+            seed=args.seed, h_max=args.h_max, bins=args.bins, xy_bins=tuple(args.xy_bins) if args.joint else None,
+            stride=args.stride, progress=progress, checkpoint=args.checkpoint, resume=args.resume,
+            scheduler=args.scheduler, chunk_paths=args.chunk_paths, checkpoint_every=args.checkpoint_every,
+            max_path_steps=args.max_path_steps, max_memory=args.max_memory_gb * 1e9,
+        )
+    for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
+        print(f"vibro mc: warning: {text}", file=sys.stderr)
     stats.to_csv(args.out)
     if args.joint:
         atomic_write_text(args.joint, stats.joint_to_pandas().to_csv(index=False, float_format="%.17g"))
@@ -81,6 +92,14 @@ def run(args) -> int:
     print(f"  P(H < G(delta)) {stats.prob_below_barrier:.6g}   G(delta) = {g:.6g}")
     print(f"  impacts/time    {stats.impact_rate:.6g}   ({stats.impacts} impacts)")
     print(f"  E[x^2]          {stats.mean_x2:.6g}")
+    out = stats.outside()
+    h = out["H"]
+    print(f"  H outside bins  {h['fraction']:.4g} uncounted  ({h['below']} below 0, {h['above']} above "
+          f"h_max={stats.settings['h_max']:g}, of {h['total']} samples)")
+    for name in ("xy", "speed"):
+        if name in out and out[name]["outside"]:
+            print(f"  {name + ' outside':<15} {out[name]['fraction']:.4g}  ({out[name]['outside']} of "
+                  f"{out[name]['total']})")
     if stats.violations:
         print(f"  WARNING: {stats.violations} steps ended outside the barriers", file=sys.stderr)
         return 1
