@@ -373,7 +373,7 @@ def output_names(number: int) -> dict:
 
 
 def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, force: bool = False,
-               progress: bool = False, dpi: int = 110, cache: bool = True) -> FigureResult:
+               progress: bool = False, dpi: int = 110, cache: bool = True, log=None) -> FigureResult:
     """Compute, draw and write figure ``number`` into ``out_dir``; reuse it when already finished.
 
     Parameters
@@ -389,11 +389,13 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     force : bool
         Recompute even when a finished figure with the same spec hash exists.
     progress : bool
-        Show tqdm progress bars.
+        Show tqdm progress bars (meant for a terminal).
     dpi : int
         PNG resolution.
     cache : bool
         Share Monte Carlo runs between figures through ``out_dir/.mc-cache``.
+    log : callable, optional
+        Called with one line per stage (each case, the drawing); for logs, where bars would be redrawn as lines.
 
     Returns
     -------
@@ -423,8 +425,11 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     mc_cache = MCCache(out_dir / ".mc-cache") if cache else None
     results = []
     bar = tqdm(spec.cases, desc=f"figure {spec.number}", unit="case", disable=not progress, leave=False)
-    for case in bar:
+    for k, case in enumerate(bar, 1):
         bar.set_postfix_str(case.label)
+        if log is not None:
+            log(f"figure {spec.number}: case {k}/{len(spec.cases)} {case.label}: averaging"
+                + (" and Monte Carlo" if with_mc else ""))
         results.append(compute_case(spec, case, preset, with_mc, mc_cache, progress))
     metrics = [case_metrics(spec, r) for r in results]
     claims = check_claims(spec, results, metrics)
@@ -433,6 +438,8 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     from .render import render_figure
     from .store import atomic_write
 
+    if log is not None:
+        log(f"figure {spec.number}: drawing {paths['png']}")
     notes = disagreements(spec, metrics, claims)
     caption = render_caption(spec, metrics, with_mc, preset, notes)
     atomic_write(paths["png"], lambda tmp: render_figure(spec, results, metrics, caption, tmp, dpi=dpi))
