@@ -119,3 +119,23 @@ def test_orbit_piped_into_head(tmp_path):
     assert proc.stdout.splitlines()[0].startswith("vibro orbit:")
     assert proc.stdout.splitlines()[-1] in ("status=141", "status=0")  # 0 when vibro finished before head left
     assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("script, needle", [("02_free_orbit_energy_loss.py", "wrote "),
+                                            ("05_reproduce_paper.py", "-> ")])
+def test_examples_write_outside_the_working_directory_and_keep_what_they_print(tmp_path, script, needle):
+    # run from an empty folder without an output argument: nothing may appear there, and the path the script
+    # prints must still exist after it exits
+    import re
+    import shutil
+
+    proc = subprocess.run([sys.executable, str(ROOT / "examples" / script)], capture_output=True, text=True,
+                          cwd=tmp_path, env={**_env(), "MPLBACKEND": "Agg"}, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert list(tmp_path.iterdir()) == []
+    line = next(ln for ln in proc.stdout.splitlines() if needle in ln)
+    printed = Path(re.search(r"(/\S+\.png)", line).group(1))
+    try:
+        assert printed.is_file() and printed.stat().st_size > 10_000
+    finally:
+        shutil.rmtree(printed.parent, ignore_errors=True)

@@ -250,3 +250,39 @@ def test_example_05_reproduce_paper_runs(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "OK" in proc.stdout
     assert (tmp_path / "fig02.png").is_file() and (tmp_path / "fig02.json").is_file()
+
+
+# ----------------------------------------------------------------------------------------------- no pickles
+def test_mc_cache_holds_numbers_only_and_never_unpickles(outdir, tmp_path, monkeypatch):
+    import pickle
+
+    from vibro.studies.figures import run_figure
+
+    cache = outdir / ".mc-cache"
+    assert not list(outdir.rglob("*.pkl"))
+    assert list(cache.glob("mc-*.npz")) and list(cache.glob("mc-*.json"))
+    for f in cache.glob("mc-*.npz"):
+        with np.load(f, allow_pickle=False) as data:  # raises on an object array
+            assert all(data[k].dtype != object for k in data.files)
+
+    d = tmp_path / "out"
+    shutil.copytree(outdir, d)
+    # a planted pickle that would leave a file behind if anything unpickled it
+    marker = tmp_path / "pwned"
+
+    class Payload:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    (d / ".mc-cache" / "mc-planted.pkl").write_bytes(pickle.dumps(Payload()))
+
+    def refuse(*a, **k):
+        raise AssertionError("pickle used")
+
+    for name in ("load", "loads", "dump", "dumps"):
+        monkeypatch.setattr(pickle, name, refuse)
+    res = run_figure(3, d, preset="quick")  # Fig. 3 is Fig. 2's first case: its Monte Carlo comes from the cache
+    assert res.status == "finished"
+    assert all(case["mc"]["cached"] for case in res.sidecar["cases"].values())
+    assert not marker.exists()
+    assert [p.name for p in d.rglob("*.pkl")] == ["mc-planted.pkl"]

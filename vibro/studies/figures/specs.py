@@ -187,9 +187,10 @@ class FigureSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 """Bumped when the outputs change (file shape, or the numbers of the analytic curves), so that older finished
-figures are recomputed; Monte Carlo runs stay reused from their own cache. 4: the jump method's tail near h_max."""
+figures are recomputed; Monte Carlo runs stay reused from their own cache. 4: the jump method's tail near h_max.
+5: the Monte Carlo cache holds npz + JSON, no pickles (old .pkl entries are never loaded, so those runs are redone)."""
 
 
 def _sizes(default_paths: int, default_t: float, burn: float, quick_t: float = 60.0, full_factor: int = 8):
