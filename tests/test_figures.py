@@ -286,3 +286,35 @@ def test_mc_cache_holds_numbers_only_and_never_unpickles(outdir, tmp_path, monke
     assert all(case["mc"]["cached"] for case in res.sidecar["cases"].values())
     assert not marker.exists()
     assert [p.name for p in d.rglob("*.pkl")] == ["mc-planted.pkl"]
+
+
+def _fonts_and_axes(fig):
+    from matplotlib.text import Text
+
+    sizes = [t.get_fontsize() for t in fig.findobj(Text) if t.get_text().strip()]
+    return sizes, fig.axes
+
+
+def test_figures_are_readable_joint_colour_bar_labelled_beside_the_panels(outdir, tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from vibro.studies.figures import run_figure
+
+    drawn = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (drawn.append(self), real(self, *a, **k))[1])
+    d = tmp_path / "out"
+    shutil.copytree(outdir, d)
+    assert run_figure(3, d, preset="quick").status == "finished"   # joint, Monte Carlo from the cache
+    assert run_figure(2, d, preset="quick", force=True).status == "finished"  # energy
+    joint, energy = drawn
+    for fig in (joint, energy):
+        sizes, _ = _fonts_and_axes(fig)
+        assert min(sizes) >= 9.0
+        caption = fig.texts[0].get_text()
+        assert "A new type of bilateral vibro-impact model: random vibration analysis" in caption.replace("\n", " ")
+        assert "docs/paper-readings.md" in caption.replace("\n", " ")
+    *panels, bar = joint.axes
+    assert bar.get_ylabel() == "joint density p(x, y)"
+    gap_in = (bar.get_position().x0 - panels[-1].get_position().x1) * joint.get_figwidth()
+    assert 0 < gap_in < 0.3

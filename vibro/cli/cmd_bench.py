@@ -22,7 +22,8 @@ def register(subparsers) -> None:
     )
     p.add_argument("task", choices=["work-precision", "validity", "solve-verify"], help="which study to run")
     p.add_argument("--out-dir", default="bench", dest="out_dir", help="output directory (default ./bench)")
-    p.add_argument("--quick", action="store_true", help="small sizes: a few minutes on 2 cores (default: the full sizes, several times longer)")
+    p.add_argument("--quick", action="store_true",
+                   help="small sizes: a few minutes on 2 cores (default: the full sizes, several times longer)")
     p.add_argument("--parts", default=None,
                    help="comma-separated subset: work-precision mc,averaging,deterministic; validity "
                         "averaging,mc,orbits (default: every part)")

@@ -7,15 +7,17 @@ import sys
 import time
 
 from hybrid.errors import ParameterError
+from vibro.references import PAPER, READINGS
 
 
 def register(subparsers) -> None:
     """Add the ``figure`` subcommand."""
     p = subparsers.add_parser(
         "figure", help="reproduce a paper figure (2-16) or all of them: PNG + CSV + JSON sidecar",
-        description="Reproduce the paper's Figures 2-16: analytic p(H) or p(x, y) by the paper's averaging and the "
-                    "jump method, beside Monte Carlo. Finished figures (sidecar JSON with the same spec hash) are "
-                    "reused; use --force to recompute.",
+        description=f"Reproduce Figures 2-16 of the paper {PAPER}. Each figure shows the analytic p(H) or p(x, y) "
+                    "by the paper's averaging and by the jump method, beside Monte Carlo. How we read the paper's "
+                    f"typos and ambiguities: {READINGS}. Finished figures (sidecar JSON with the same spec hash) "
+                    "are reused; use --force to recompute.",
     )
     p.add_argument("number", metavar="N|all|list", help="figure number 2-16, 'all', or 'list' (print the table)")
     p.add_argument("--out-dir", default="figures", help="output directory (default: ./figures)")
@@ -25,7 +27,8 @@ def register(subparsers) -> None:
                            "~25 s for all figures on 2 cores")
     size.add_argument("--full", action="store_const", dest="preset", const="full",
                       help="8x the default Monte Carlo paths (about 8x the time)")
-    p.add_argument("--no-mc", action="store_true", help="analytic curves only (no Monte Carlo: about a second per figure)")
+    p.add_argument("--no-mc", action="store_true",
+                   help="analytic curves only (no Monte Carlo: about a second per figure)")
     p.add_argument("--force", action="store_true", help="recompute even if a finished figure exists")
     p.add_argument("--dpi", type=int, default=110, help="PNG resolution (default 110)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

@@ -30,7 +30,8 @@ def register(subparsers) -> None:
     add_model_arguments(p)
     p.add_argument("--x0", type=float, default=0.0, help="initial position, inside the gap (default 0)")
     p.add_argument("--v0", type=float, default=2.2, help="initial velocity (default 2.2)")
-    p.add_argument("--t-end", type=float, default=60.0, dest="t_end", help="final time (default 60); cost ∝ impacts up to t-end")
+    p.add_argument("--t-end", type=float, default=60.0, dest="t_end",
+                   help="final time (default 60); cost ∝ impacts up to t-end")
     p.add_argument("--backend", choices=["heyoka", "scipy"], default="heyoka",
                    help="integrator: heyoka (Taylor, ~0.1 ms per impact after a one-off JIT compile of a few "
                         "seconds) or scipy (solve_ivp DOP853, ~2-6 ms per impact)")
@@ -38,7 +39,8 @@ def register(subparsers) -> None:
     p.add_argument("--max-impacts", type=int, default=1_000_000, dest="max_impacts",
                    help="stop with status max_impacts after this many impacts; bounds the cost, which grows with "
                         "the number of impacts")
-    p.add_argument("--out", default=None, metavar="FILE.csv", help="write the impact log here (atomically; not written if absent)")
+    p.add_argument("--out", default=None, metavar="FILE.csv",
+                   help="write the impact log here (atomically; not written if absent)")
     p.add_argument("--rows", type=int, default=6, help="table rows per comparison (default 6)")
     p.set_defaults(func=run)
 

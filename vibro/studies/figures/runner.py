@@ -435,6 +435,8 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     claims = check_claims(spec, results, metrics)
     table = curve_rows(spec, results)
 
+    from vibro.references import PAPER, READINGS
+
     from .render import render_figure
     from .store import atomic_write
 
@@ -447,6 +449,7 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     wall = time.perf_counter() - t_start
     sidecar = {
         "figure": spec.number, "status": "finished", "kind": spec.kind, "title": spec.title,
+        "paper": PAPER, "paper_readings": READINGS,
         "caption": caption, "claim": spec.claim, "choices": list(spec.choices), "in_paper_mc": spec.in_paper_mc,
         "preset": preset, "monte_carlo": bool(with_mc), "spec_hash": spec_hash,
         "methods": {"analytic": list(ANALYTIC_METHODS), "analytic_points": ANALYTIC_POINTS,
@@ -502,7 +505,10 @@ def disagreements(spec: FigureSpec, metrics: list[dict], claims: list[dict]) -> 
 def render_caption(spec: FigureSpec, metrics: list[dict], with_mc: bool, preset: str,
                    notes: list[str] | None = None) -> str:
     """The caption under the figure: what is drawn, our choices, the L1 distances and the disagreements."""
-    parts = [f"Fig. {spec.number} (reproduction, preset '{preset}'). The paper: " + spec.claim]
+    from vibro.references import PAPER_TITLE, READINGS
+
+    parts = [f"Fig. {spec.number} of \"{PAPER_TITLE}\", reproduced (preset '{preset}'; our readings of the paper: "
+             f"{READINGS}). The paper: " + spec.claim]
     parts += list(spec.choices)
     if spec.kind == "energy":
         parts.append("Lines: averaging, solid = paper method (eq. 30), dashed = jump method; symbols: Monte Carlo; "
