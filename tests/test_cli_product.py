@@ -139,3 +139,34 @@ def test_examples_write_outside_the_working_directory_and_keep_what_they_print(t
         assert printed.is_file() and printed.stat().st_size > 10_000
     finally:
         shutil.rmtree(printed.parent, ignore_errors=True)
+
+
+def test_repository_stands_alone():
+    # nothing tracked may point at the shared folder outside the repository or at its notes file
+    files = subprocess.run(["git", "ls-files"], capture_output=True, text=True, cwd=ROOT, check=True).stdout.split()
+    bad = []
+    for name in files:
+        if name.endswith((".py", ".md", ".toml", ".cff")) and name != "tests/test_cli_product.py":
+            text = (ROOT / name).read_text(encoding="utf-8")
+            if "NOTES.md" in text or "shared/paper" in text:
+                bad.append(name)
+    assert bad == []
+    for name in ("LICENSE", "CITATION.cff", "CHANGELOG.md", "docs/paper-readings.md"):
+        assert (ROOT / name).is_file()
+    assert "BSD 3-Clause" in (ROOT / "LICENSE").read_text() and "the vibro-impact developers" in (
+        ROOT / "LICENSE").read_text()
+
+
+def test_throughput_benchmark_needs_no_outside_baseline(monkeypatch, tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("mc_throughput", ROOT / "benchmarks" / "mc_throughput.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    monkeypatch.setattr(bench, "DEFAULT_BASELINE", tmp_path / "absent.py")
+    assert bench.resolve_baseline(None) is None and bench.load_baseline(None) is None
+    assert bench.resolve_baseline("none") is None
+    with pytest.raises(SystemExit):
+        bench.resolve_baseline(str(tmp_path / "missing.py"))
+    h = bench.numpy_reference(32, 400, 1e-2, 0.4, seed=1, nburn=200)
+    assert h.sum() == 32 * 200 and h.argmax() < 100  # every sample below h_max, mass at low energy
