@@ -2,7 +2,7 @@
 
 * ``paper`` (eq. 13): a drift -dH/T with dH = (1 - e**4)(H - G(delta)), e = e(v), v = sqrt(2(H - G(delta))).
 * ``exact-two-impact``: the same with dH = (1 - e1**2 e2**2)(H - G(delta)), e1 = e(v), e2 = e(e1 v): the free
-  system's loss over two successive impacts (NOTES.md).
+  system's loss over two successive impacts (docs/paper-readings.md).
 * ``jump``: no loss drift; every impact is a jump H -> G(delta) + e(v)**2 (H - G(delta)) at rate 2/T(H).
 
 Each method is a small class; ``METHODS[name]`` gives an instance. New methods subclass :class:`ImpactMethod` and

@@ -5,7 +5,7 @@ restitution law with V_C = 0.4. Both deterministic backends locate every impact 
 each impact removes (1 - e^2)(H- - G(delta)) of energy (eq. 11), shows that two successive impacts remove the
 exact two-impact loss (1 - e1^2 e2^2)(H - G) rather than the paper's (1 - e^4)(H - G) (eq. 13), and draws H(t).
 
-Run:  python examples/02_free_orbit_energy_loss.py [--outdir DIR]
+Run:  python examples/02_free_orbit_energy_loss.py [--outdir DIR]   (default: a new temporary folder, kept)
 Exits with status 1 if a check fails.
 """
 
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -29,9 +30,12 @@ TOLERANCE = {"heyoka": 1e-10, "scipy": 1e-7}  # relative, eq. 11 (issue 2)
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--outdir", default=".", help="folder for the figure and the CSV (default: .)")
+    parser.add_argument("--outdir", default=None,
+                        help="folder for the figure and the CSV (default: a new folder in the system's temporary "
+                             "directory, kept and printed; never the current directory)")
     args = parser.parse_args(argv)
-    outdir = Path(args.outdir)
+    # a run from the repository root must not litter it: without --outdir, write into a fresh temporary folder
+    outdir = Path(args.outdir) if args.outdir else Path(tempfile.mkdtemp(prefix="vibro-example-02-"))
     outdir.mkdir(parents=True, exist_ok=True)
 
     law = Ma(vc=0.4)

@@ -12,7 +12,8 @@ reads back the sidecar JSON and the CSV and checks, on the numbers:
 The default Monte Carlo preset is used: the ``quick`` preset is too noisy for check 1 (its noise L1 ~ 0.1-0.2 is
 larger than the paper-vs-jump difference ~ 0.05). About 5 s with a warm kernel cache, ~10 s cold.
 
-Run:  python examples/05_reproduce_paper.py [OUT_DIR]   (default: a temporary directory)
+Run:  python examples/05_reproduce_paper.py [OUT_DIR]   (default: a new temporary folder, kept after the run so
+that the printed paths stay valid)
 Exits with status 1 if a check fails.
 """
 
@@ -73,7 +74,6 @@ def main(out_dir: Path) -> int:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1:
-        sys.exit(main(Path(sys.argv[1])))
-    with tempfile.TemporaryDirectory() as tmp:
-        sys.exit(main(Path(tmp)))
+    # the printed paths must still exist after the script ends, so the default folder is kept, not a
+    # TemporaryDirectory (which was deleted on exit, leaving the user a path to nothing)
+    sys.exit(main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="vibro-example-05-"))))

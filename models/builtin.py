@@ -53,9 +53,9 @@ class DuffingImpact(ImpactOscillator):
 class DuffingVanDerPolImpact(ImpactOscillator):
     """Example 2 (eq. 39), Duffing-van der Pol with impacts.
 
-    ``reading='van-der-pol'`` (default, NOTES.md) uses h = (c1 + c2 x**2) y with c1 = -0.01, c2 = 0.005: negative
-    damping near the origin and a limit cycle of amplitude about 2.7. ``reading='literal'`` uses the printed
-    h = (c1 - c2 x**2) y, which is negative everywhere and has no stationary density without barriers.
+    ``reading='van-der-pol'`` (default; see docs/paper-readings.md) uses h = (c1 + c2 x**2) y with c1 = -0.01,
+    c2 = 0.005: negative damping near the origin and a limit cycle of amplitude about 2.7. ``reading='literal'`` uses
+    the printed h = (c1 - c2 x**2) y, which is negative everywhere and has no stationary density without barriers.
 
     Examples
     --------

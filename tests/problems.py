@@ -25,7 +25,7 @@ def energy_loss_per_impact(e: float, H_minus: float, G_delta: float) -> float:
 
 
 def exact_two_impact_loss(law, H_minus: float, G_delta: float) -> float:
-    """Loss over two successive free impacts: (1 - e1**2 e2**2)(H - G), e2 = e(e1 v) (NOTES.md)."""
+    """Loss over two successive free impacts: (1 - e1**2 e2**2)(H - G), e2 = e(e1 v) (docs/paper-readings.md)."""
     v = math.sqrt(2.0 * (H_minus - G_delta))
     e1 = float(law.coefficient(v))
     e2 = float(law.coefficient(e1 * v))

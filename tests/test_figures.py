@@ -250,3 +250,71 @@ def test_example_05_reproduce_paper_runs(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "OK" in proc.stdout
     assert (tmp_path / "fig02.png").is_file() and (tmp_path / "fig02.json").is_file()
+
+
+# ----------------------------------------------------------------------------------------------- no pickles
+def test_mc_cache_holds_numbers_only_and_never_unpickles(outdir, tmp_path, monkeypatch):
+    import pickle
+
+    from vibro.studies.figures import run_figure
+
+    cache = outdir / ".mc-cache"
+    assert not list(outdir.rglob("*.pkl"))
+    assert list(cache.glob("mc-*.npz")) and list(cache.glob("mc-*.json"))
+    for f in cache.glob("mc-*.npz"):
+        with np.load(f, allow_pickle=False) as data:  # raises on an object array
+            assert all(data[k].dtype != object for k in data.files)
+
+    d = tmp_path / "out"
+    shutil.copytree(outdir, d)
+    # a planted pickle that would leave a file behind if anything unpickled it
+    marker = tmp_path / "pwned"
+
+    class Payload:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    (d / ".mc-cache" / "mc-planted.pkl").write_bytes(pickle.dumps(Payload()))
+
+    def refuse(*a, **k):
+        raise AssertionError("pickle used")
+
+    for name in ("load", "loads", "dump", "dumps"):
+        monkeypatch.setattr(pickle, name, refuse)
+    res = run_figure(3, d, preset="quick")  # Fig. 3 is Fig. 2's first case: its Monte Carlo comes from the cache
+    assert res.status == "finished"
+    assert all(case["mc"]["cached"] for case in res.sidecar["cases"].values())
+    assert not marker.exists()
+    assert [p.name for p in d.rglob("*.pkl")] == ["mc-planted.pkl"]
+
+
+def _fonts_and_axes(fig):
+    from matplotlib.text import Text
+
+    sizes = [t.get_fontsize() for t in fig.findobj(Text) if t.get_text().strip()]
+    return sizes, fig.axes
+
+
+def test_figures_are_readable_joint_colour_bar_labelled_beside_the_panels(outdir, tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from vibro.studies.figures import run_figure
+
+    drawn = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (drawn.append(self), real(self, *a, **k))[1])
+    d = tmp_path / "out"
+    shutil.copytree(outdir, d)
+    assert run_figure(3, d, preset="quick").status == "finished"   # joint, Monte Carlo from the cache
+    assert run_figure(2, d, preset="quick", force=True).status == "finished"  # energy
+    joint, energy = drawn
+    for fig in (joint, energy):
+        sizes, _ = _fonts_and_axes(fig)
+        assert min(sizes) >= 9.0
+        caption = fig.texts[0].get_text()
+        assert "A new type of bilateral vibro-impact model: random vibration analysis" in caption.replace("\n", " ")
+        assert "docs/paper-readings.md" in caption.replace("\n", " ")
+    *panels, bar = joint.axes
+    assert bar.get_ylabel() == "joint density p(x, y)"
+    gap_in = (bar.get_position().x0 - panels[-1].get_position().x1) * joint.get_figwidth()
+    assert 0 < gap_in < 0.3

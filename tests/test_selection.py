@@ -1,7 +1,7 @@
 """The chooser of vibro.solve: its diagnostics against closed forms, its rules, its command line.
 
 Oracles: the elastic stationary density of tests/problems.py (closed form + scipy quadrature), mpmath periods,
-the two-impact loss formula of NOTES.md and Rice's formula for the impact-speed tail.
+the two-impact loss formula of docs/paper-readings.md and Rice's formula for the impact-speed tail.
 """
 
 from __future__ import annotations
@@ -105,7 +105,8 @@ def test_high_critical_speed_counts_as_elastic_only_when_the_tail_is_below_tol_o
 
 def test_fig2_parameters_choose_jump_because_paper_misses_the_tolerance():
     ch = choose(DuffingImpact(), tol=0.05, mc_pilot=False)
-    assert ch.predictions["paper"] > 0.05      # the paper's drift loss is known to be ~0.06 off here (NOTES.md)
+    # the paper's drift loss is known to be ~0.06 off here (docs/paper-readings.md)
+    assert ch.predictions["paper"] > 0.05
     assert ch.method == "jump"
     assert "jump" in ch.reason
 

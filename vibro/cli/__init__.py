@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 import warnings
@@ -16,8 +17,40 @@ from hybrid.errors import VibroError, VibroWarning
 from vibro import __version__
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help that states every option's default, unless its text already names one.
+
+    ``argparse.ArgumentDefaultsHelpFormatter`` would repeat a default that the help already gives ("(default 0)
+    (default: 0.0)") and says nothing for an option without help; here every option has help (a test checks) and
+    gets "(default: ...)" appended once. Flags (``store_true``) and ``--help``/``--version`` get none.
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="x", formatter_class=DefaultsFormatter)
+    >>> _ = p.add_argument("--dt", type=float, default=0.01, help="time step")
+    >>> "time step (default: 0.01)" in p.format_help()
+    True
+    """
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("(default" in text or action.default is argparse.SUPPRESS or not action.option_strings
+                or action.required):
+            return text
+        if isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction, argparse._StoreConstAction)):
+            return text
+        default = action.default
+        if isinstance(default, (list, tuple)):
+            default = " ".join(str(v) for v in default) if default else "none"
+        return f"{text} (default: {'none' if default is None else default})"
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports errors in one line and exits with status 2."""
+    """argparse that reports errors in one line, exits with status 2, and shows every default in its help."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         self.exit(2, f"vibro: error: {message}\n")
@@ -41,8 +74,48 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+EXIT_BROKEN_PIPE = 141
+"""Exit status when the reader of stdout went away (``vibro orbit ... | head -1``): 128 + SIGPIPE, what a C tool
+killed by SIGPIPE reports, so a shell pipeline with ``set -o pipefail`` still sees that the output was cut short."""
+
+
+def _stdout_gone() -> int:
+    # Python flushes stdout again at exit and would print a second BrokenPipeError; point fd 1 at devnull first
+    # (the way the Python docs recommend), then report the conventional status without a traceback.
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout without a file descriptor (captured in a test)
+        pass
+    return EXIT_BROKEN_PIPE
+
+
+def progress_mode(flag: bool | None, stream=None) -> str:
+    """How a command reports progress: ``'bars'``, ``'lines'`` or ``'off'``.
+
+    ``--progress`` (True) asks for tqdm bars, ``--no-progress`` (False) for silence; without either, bars go to a
+    terminal and a log file gets one line per stage instead (a bar redrawn into a file is dozens of lines).
+
+    Examples
+    --------
+    >>> import io
+    >>> progress_mode(None, io.StringIO()), progress_mode(True, io.StringIO()), progress_mode(False)
+    ('lines', 'bars', 'off')
+    """
+    if flag is not None:
+        return "bars" if flag else "off"
+    stream = sys.stderr if stream is None else stream
+    try:
+        return "bars" if stream.isatty() else "lines"
+    except (AttributeError, ValueError):  # closed or replaced stream
+        return "lines"
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run ``vibro`` with ``argv``; return the exit status (0 ok, 1 run failed, 2 bad input)."""
+    """Run ``vibro`` with ``argv``; return the exit status.
+
+    0 ok, 1 run failed, 2 bad input, 130 interrupted, 141 (= 128 + SIGPIPE) when stdout was closed by its reader.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -58,6 +131,9 @@ def main(argv: list[str] | None = None) -> int:
 
             warnings.showwarning = one_line
             status = args.func(args)
+            sys.stdout.flush()  # a closed pipe shows up here, inside the handler, not at interpreter exit
+    except BrokenPipeError:
+        return _stdout_gone()
     except VibroError as exc:
         print(f"vibro {args.command}: error: {exc}", file=sys.stderr)
         return 2

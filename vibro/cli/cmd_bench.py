@@ -20,12 +20,13 @@ def register(subparsers) -> None:
                     "and orbit backend fails (heatmaps, CSV). solve-verify: run 'vibro solve' on cases not used to "
                     "fit its rules and compare with converged Monte Carlo.",
     )
-    p.add_argument("task", choices=["work-precision", "validity", "solve-verify"])
+    p.add_argument("task", choices=["work-precision", "validity", "solve-verify"], help="which study to run")
     p.add_argument("--out-dir", default="bench", dest="out_dir", help="output directory (default ./bench)")
-    p.add_argument("--quick", action="store_true", help="small sizes: a few minutes on 2 cores")
+    p.add_argument("--quick", action="store_true",
+                   help="small sizes: a few minutes on 2 cores (default: the full sizes, several times longer)")
     p.add_argument("--parts", default=None,
                    help="comma-separated subset: work-precision mc,averaging,deterministic; validity "
-                        "averaging,mc,orbits")
+                        "averaging,mc,orbits (default: every part)")
     p.add_argument("--tol", type=float, default=0.02, help="solve-verify: the tolerance (default 0.02)")
     p.set_defaults(func=run)
 

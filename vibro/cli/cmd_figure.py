@@ -2,31 +2,38 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
 from hybrid.errors import ParameterError
+from vibro.references import PAPER, READINGS
 
 
 def register(subparsers) -> None:
     """Add the ``figure`` subcommand."""
     p = subparsers.add_parser(
         "figure", help="reproduce a paper figure (2-16) or all of them: PNG + CSV + JSON sidecar",
-        description="Reproduce the paper's Figures 2-16: analytic p(H) or p(x, y) by the paper's averaging and the "
-                    "jump method, beside Monte Carlo. Finished figures (sidecar JSON with the same spec hash) are "
-                    "reused; use --force to recompute.",
+        description=f"Reproduce Figures 2-16 of the paper {PAPER}. Each figure shows the analytic p(H) or p(x, y) "
+                    "by the paper's averaging and by the jump method, beside Monte Carlo. How we read the paper's "
+                    f"typos and ambiguities: {READINGS}. Finished figures (sidecar JSON with the same spec hash) "
+                    "are reused; use --force to recompute.",
     )
     p.add_argument("number", metavar="N|all|list", help="figure number 2-16, 'all', or 'list' (print the table)")
     p.add_argument("--out-dir", default="figures", help="output directory (default: ./figures)")
     size = p.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_const", dest="preset", const="quick",
-                      help="small Monte Carlo (smoke tests; noisy)")
+                      help="small Monte Carlo (smoke tests; noisy); the default size takes 7-9 s for Fig. 2 and "
+                           "~25 s for all figures on 2 cores")
     size.add_argument("--full", action="store_const", dest="preset", const="full",
-                      help="8x the default Monte Carlo paths")
-    p.add_argument("--no-mc", action="store_true", help="analytic curves only")
+                      help="8x the default Monte Carlo paths (about 8x the time)")
+    p.add_argument("--no-mc", action="store_true",
+                   help="analytic curves only (no Monte Carlo: about a second per figure)")
     p.add_argument("--force", action="store_true", help="recompute even if a finished figure exists")
     p.add_argument("--dpi", type=int, default=110, help="PNG resolution (default 110)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bars; --no-progress: silent (default: bars on a terminal, otherwise one line "
+                        "per stage on stderr)")
     p.set_defaults(func=run, preset="default")
 
 
@@ -62,14 +69,17 @@ def run(args) -> int:
     targets = _targets(args.number)
     if args.dpi < 20 or args.dpi > 600:
         raise ParameterError(f"--dpi {args.dpi} is outside 20-600")
+    from vibro.cli import progress_mode
     from vibro.studies.figures import run_figure
 
+    mode = progress_mode(args.progress)
+    log = (lambda line: print(line, file=sys.stderr, flush=True)) if mode == "lines" else None
     failures = 0
     for n in targets:
         t0 = time.perf_counter()
         try:
             res = run_figure(n, args.out_dir, preset=args.preset, with_mc=not args.no_mc, force=args.force,
-                             progress=not args.no_progress, dpi=args.dpi)
+                             progress=mode == "bars", dpi=args.dpi, log=log)
         except (KeyboardInterrupt, ParameterError):
             raise
         except Exception as exc:  # one failed figure must not stop 'all'; report it in one line

@@ -31,13 +31,17 @@ def register(subparsers) -> None:
     p.add_argument("--method", choices=DENSITY_METHODS, default="paper",
                    help="how impacts enter: paper (eq. 13 drift), exact-two-impact, jump (default paper)")
     p.add_argument("--h-max", type=float, default=4.0, dest="h_max", help="upper energy (default 4)")
-    p.add_argument("--points", type=int, default=2000, help="energy grid points (default 2000)")
-    p.add_argument("--out", required=True, metavar="FILE.csv", help="CSV with columns H,p (written atomically)")
-    p.add_argument("--joint", default=None, metavar="FILE.csv", help="also write p(x, y) (eq. 31) as x,y,p")
+    p.add_argument("--points", type=int, default=2000,
+                   help="energy grid points (default 2000); cost ∝ points, well under a second at the default")
+    p.add_argument("--out", required=True, metavar="FILE.csv",
+                   help="CSV with columns H,p (written atomically; required)")
+    p.add_argument("--joint", default=None, metavar="FILE.csv",
+                   help="also write p(x, y) (eq. 31) as x,y,p (not written if absent)")
     p.add_argument("--joint-points", type=int, default=101, dest="joint_points",
-                   help="grid points per axis of p(x, y) (default 101)")
+                   help="grid points per axis of p(x, y) (default 101); cost ∝ joint-points squared")
     p.add_argument("--equations", choices=["text", "latex"], default=None,
-                   help="also print the model's Itô and averaged equations (eqs. 16-26) as text or LaTeX")
+                   help="also print the model's Itô and averaged equations (eqs. 16-26) as text or LaTeX (default: "
+                        "not printed)")
     p.set_defaults(func=run)
 
 

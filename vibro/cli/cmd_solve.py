@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import argparse
+import sys
+import time
+
 
 def register(subparsers) -> None:
     """Add the ``solve`` subcommand.
@@ -29,9 +33,13 @@ def register(subparsers) -> None:
                    help="force a method (default: auto)")
     p.add_argument("--max-cost", type=float, default=600.0, dest="max_cost",
                    help="wall-time budget of Monte Carlo in seconds (default 600)")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, default=1,
+                   help="root seed of the Monte Carlo pilot and runs (same seed, same numbers)")
     p.add_argument("--dry-run", action="store_true", help="only print the choice; compute nothing expensive")
-    p.add_argument("--out", default=None, metavar="FILE.csv", help="write p(H) (columns H, p)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="Monte Carlo progress bars; --no-progress: silent (default: bars on a terminal, otherwise "
+                        "one line per stage on stderr)")
+    p.add_argument("--out", default=None, metavar="FILE.csv", help="write p(H) (columns H, p; not written if absent)")
     p.set_defaults(func=run)
 
 
@@ -39,11 +47,11 @@ def run(args) -> int:
     """Choose, (optionally) run, and report."""
     from hybrid.errors import ParameterError
     from vibro.solve import choose, solve
+    from vibro.solve.choice import check_request
 
     from .common import model_from_args
 
-    if not (0.0 < args.tol < 2.0):
-        raise ParameterError(f"--tol {args.tol:g}: an L1 distance lies in (0, 2); use e.g. --tol 0.02")
+    check_request(args.tol, args.max_cost)  # before any output: bad input gives one line
     model = model_from_args(args)
     print(f"model: {model!r}")
     if args.dry_run:
@@ -51,7 +59,17 @@ def run(args) -> int:
             raise ParameterError("--dry-run reports the automatic choice; drop --method")
         print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False).summary())
         return 0
-    sol = solve(model, args.tol, method=args.method, max_cost=args.max_cost, seed=args.seed)
+    from vibro.cli import progress_mode
+
+    mode = progress_mode(args.progress)
+    if mode == "lines":
+        print(f"vibro solve: choosing and running a method for tol {args.tol:g} (Monte Carlo budget "
+              f"{args.max_cost:g} s)", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    sol = solve(model, args.tol, method=args.method, max_cost=args.max_cost, seed=args.seed,
+                progress=mode == "bars")
+    if mode == "lines":
+        print(f"vibro solve: {sol.method} done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     print(sol.summary())
     preds = ", ".join(f"{k} {v:.3g}" for k, v in sol.choice.predictions.items())
     print(f"predicted L1 of the candidates: {preds}")

@@ -90,7 +90,7 @@ def cycle_quantities(model, H):
 
     A diagnostic, on the orbit nodes of :class:`averaging.quadrature.OrbitNodes` (no turning-point singularity,
     accurate as H -> G(delta)+). The impact loss per quasi-period is (1 - e1**2 e2**2)(H - G(delta)) with
-    e2 = e(e1 v) (the exact two-impact loss of NOTES.md).
+    e2 = e(e1 v) (the exact two-impact loss of docs/paper-readings.md).
 
     Parameters
     ----------

@@ -11,6 +11,11 @@ from .mcdata import JOINT_GRID, mc_h_density, mc_xy_density, xy_range
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c")
 MARKERS = ("o", "^", "s")  # the paper's ● ▲ ■
 
+FONT_PT = 9.0
+"""Smallest font anywhere in a figure (ticks, legend, caption): readable when the PNG is shown at its size."""
+LABEL_PT = 10.0
+"""Axis labels, panel titles and colour-bar labels."""
+
 
 def _figure(width, height):
     import matplotlib
@@ -21,10 +26,25 @@ def _figure(width, height):
     return Figure(figsize=(width, height))
 
 
-def _caption(fig, caption, width_chars):
-    text = "\n".join(textwrap.wrap(caption, width_chars))
-    fig.text(0.01, 0.01, text, ha="left", va="bottom", fontsize=6.5, family="sans-serif")
-    return text.count("\n") + 1
+def _caption_lines(caption: str, width_in: float) -> list[str]:
+    """``caption`` wrapped to the figure width at :data:`FONT_PT` (glyphs average ~0.55 em; 0.58 keeps a margin)."""
+    chars = max(40, int((width_in - 0.3) * 72.0 / (0.58 * FONT_PT)))
+    return textwrap.wrap(caption, chars, break_on_hyphens=False)  # keep names like "vibro-impact" whole
+
+
+def _with_caption(width_in: float, plot_in: float, caption: str, top_in: float = 0.6, below_in: float = 0.6):
+    """A figure whose height fits the plots and the whole caption; returns (fig, bottom, height) of the plot band.
+
+    The caption is drawn at :data:`FONT_PT` under the plots; the figure grows with it rather than squeezing the
+    plots or shrinking the text (earlier figures used 6.5 pt to fit).
+    """
+    lines = _caption_lines(caption, width_in)
+    caption_in = len(lines) * FONT_PT * 1.3 / 72.0 + 0.2
+    height_in = top_in + plot_in + below_in + caption_in
+    fig = _figure(width_in, height_in)
+    fig.text(0.15 / width_in, 0.1 / height_in, "\n".join(lines), ha="left", va="bottom", fontsize=FONT_PT,
+             family="sans-serif", linespacing=1.3)
+    return fig, (caption_in + below_in) / height_in, plot_in / height_in
 
 
 def render_figure(spec, results, metrics, caption, path, dpi=110) -> None:
@@ -42,10 +62,8 @@ def render_figure(spec, results, metrics, caption, path, dpi=110) -> None:
 
 def _render_energy(spec, results, metrics, caption, path, dpi):
 
-    fig = _figure(11.0, 5.6)
-    nlines = _caption(fig, caption, 190)
-    bottom = min(0.45, 0.1 + 0.028 * nlines)
-    axes = [fig.add_axes([0.06, bottom, 0.42, 0.88 - bottom]), fig.add_axes([0.56, bottom, 0.42, 0.88 - bottom])]
+    fig, bottom, band = _with_caption(11.0, 4.2, caption)
+    axes = [fig.add_axes([0.07, bottom, 0.41, band]), fig.add_axes([0.57, bottom, 0.41, band])]
     h_top = max(r.case.h_max for r in results)
     floor = np.inf
     for i, (res, m) in enumerate(zip(results, metrics)):
@@ -66,9 +84,9 @@ def _render_energy(spec, results, metrics, caption, path, dpi):
                     floor = min(floor, float(np.min(p[p > 0])))
             ax.axvline(m["G_delta"], color=col, ls=":", lw=1.0)
         axes[0].annotate("G(Δ)", (m["G_delta"], 0), xytext=(2, 2 + 9 * i), textcoords="offset points",
-                         color=col, fontsize=7, xycoords=("data", "axes fraction"))
-    axes[0].set_title("p(H), linear scale", fontsize=9)
-    axes[1].set_title("p(H), log scale (tails)", fontsize=9)
+                         color=col, fontsize=FONT_PT, xycoords=("data", "axes fraction"))
+    axes[0].set_title("p(H), linear scale", fontsize=LABEL_PT)
+    axes[1].set_title("p(H), log scale (tails)", fontsize=LABEL_PT)
     axes[1].set_yscale("log")
     peak = max(float(np.max(r.densities["paper"].p)) for r in results)
     low = floor if np.isfinite(floor) else peak * 1e-5
@@ -79,12 +97,12 @@ def _render_energy(spec, results, metrics, caption, path, dpi):
     h_lin = min(h_top, 1.1 * max(visible + [max(m["G_delta"] for m in metrics)]))
     for ax in axes:
         ax.set_xlim(0, h_lin if ax is axes[0] else h_top)
-        ax.set_xlabel("H", fontsize=9)
-        ax.set_ylabel("p(H)", fontsize=9)
-        ax.tick_params(labelsize=8)
+        ax.set_xlabel("H", fontsize=LABEL_PT)
+        ax.set_ylabel("p(H)", fontsize=LABEL_PT)
+        ax.tick_params(labelsize=FONT_PT)
     axes[0].set_ylim(bottom=0)
-    axes[0].legend(fontsize=6.5, ncol=1, frameon=False)
-    fig.suptitle(f"Fig. {spec.number}: {spec.title}", fontsize=10, y=0.98)
+    axes[0].legend(fontsize=FONT_PT, ncol=1, frameon=False)
+    fig.suptitle(f"Fig. {spec.number}: {spec.title}", fontsize=11, y=1.0 - 0.12 / fig.get_figheight(), va="top")
     fig.savefig(path, dpi=dpi, format="png")
 
 
@@ -101,13 +119,14 @@ def _render_joint(spec, results, metrics, caption, path, dpi):
         panels.append((label, xe, ye, mc_xy_density(res.mc)))  # cell edges: drawn as the histogram's cells
     vmax = max(float(np.nanmax(p)) for *_, p in panels)
     levels = np.linspace(0.0, vmax, 16)
-    fig = _figure(4.0 * len(panels) + 1.0, 5.4)
-    nlines = _caption(fig, caption, int(60 * len(panels)))
-    bottom = min(0.45, 0.1 + 0.03 * nlines)
-    width = 0.86 / len(panels)
+    # in inches: left margin, panels with a gap for the next panel's tick labels, then the colour bar right beside
+    # the last panel (it used to sit at the figure's edge, far from the data) and room for its label
+    left, panel, gap, bar_gap, bar, right = 0.75, 3.2, 0.5, 0.12, 0.18, 1.0
+    width_in = left + len(panels) * panel + (len(panels) - 1) * gap + bar_gap + bar + right
+    fig, bottom, tall = _with_caption(width_in, 3.9, caption)
     cs = None
     for i, (title, px, py, p) in enumerate(panels):
-        ax = fig.add_axes([0.05 + i * width, bottom, width - 0.05, 0.86 - bottom])
+        ax = fig.add_axes([(left + i * (panel + gap)) / width_in, bottom, panel / width_in, tall])
         if len(px) == p.shape[1] + 1 and cs is not None:
             # histogram cells, each painted with the colour of the contour band its value falls in
             band = np.clip(np.searchsorted(levels, p, side="right") - 1, 0, len(levels) - 2)
@@ -120,12 +139,15 @@ def _render_joint(spec, results, metrics, caption, path, dpi):
             ax.axvline(xb, color="k", lw=2.0)
         ax.set_xlim(x0 - 0.04 * (x1 - x0), x1 + 0.04 * (x1 - x0))
         ax.set_ylim(y0, y1)
-        ax.set_title(title, fontsize=8)
-        ax.set_xlabel("x", fontsize=9)
+        ax.set_title(title, fontsize=LABEL_PT)
+        ax.set_xlabel("x (displacement)", fontsize=LABEL_PT)
         if i == 0:
-            ax.set_ylabel("y", fontsize=9)
-        ax.tick_params(labelsize=7)
-    cax = fig.add_axes([0.93, bottom, 0.015, 0.86 - bottom])
-    fig.colorbar(cs, cax=cax).ax.tick_params(labelsize=7)
-    fig.suptitle(f"Fig. {spec.number}: {spec.title}", fontsize=10, y=0.98)
+            ax.set_ylabel("y (velocity)", fontsize=LABEL_PT)
+        ax.tick_params(labelsize=FONT_PT)
+    x_bar = left + len(panels) * panel + (len(panels) - 1) * gap + bar_gap
+    cax = fig.add_axes([x_bar / width_in, bottom, bar / width_in, tall])
+    cbar = fig.colorbar(cs, cax=cax)
+    cbar.set_label("joint density p(x, y)", fontsize=LABEL_PT)
+    cbar.ax.tick_params(labelsize=FONT_PT)
+    fig.suptitle(f"Fig. {spec.number}: {spec.title}", fontsize=11, y=1.0 - 0.12 / fig.get_figheight(), va="top")
     fig.savefig(path, dpi=dpi, format="png")

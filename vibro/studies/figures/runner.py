@@ -349,7 +349,7 @@ def output_names(number: int) -> dict:
 
 
 def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, force: bool = False,
-               progress: bool = False, dpi: int = 110, cache: bool = True) -> FigureResult:
+               progress: bool = False, dpi: int = 110, cache: bool = True, log=None) -> FigureResult:
     """Compute, draw and write figure ``number`` into ``out_dir``; reuse it when already finished.
 
     Parameters
@@ -365,11 +365,13 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     force : bool
         Recompute even when a finished figure with the same spec hash exists.
     progress : bool
-        Show tqdm progress bars.
+        Show tqdm progress bars (meant for a terminal).
     dpi : int
         PNG resolution.
     cache : bool
         Share Monte Carlo runs between figures through ``out_dir/.mc-cache``.
+    log : callable, optional
+        Called with one line per stage (each case, the drawing); for logs, where bars would be redrawn as lines.
 
     Returns
     -------
@@ -399,16 +401,23 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     mc_cache = MCCache(out_dir / ".mc-cache") if cache else None
     results = []
     bar = tqdm(spec.cases, desc=f"figure {spec.number}", unit="case", disable=not progress, leave=False)
-    for case in bar:
+    for k, case in enumerate(bar, 1):
         bar.set_postfix_str(case.label)
+        if log is not None:
+            log(f"figure {spec.number}: case {k}/{len(spec.cases)} {case.label}: averaging"
+                + (" and Monte Carlo" if with_mc else ""))
         results.append(compute_case(spec, case, preset, with_mc, mc_cache, progress))
     metrics = [case_metrics(spec, r) for r in results]
     claims = check_claims(spec, results, metrics)
     table = curve_rows(spec, results)
 
+    from vibro.references import PAPER, READINGS
+
     from .render import render_figure
     from .store import atomic_write
 
+    if log is not None:
+        log(f"figure {spec.number}: drawing {paths['png']}")
     notes = disagreements(spec, metrics, claims)
     caption = render_caption(spec, metrics, with_mc, preset, notes)
     atomic_write(paths["png"], lambda tmp: render_figure(spec, results, metrics, caption, tmp, dpi=dpi))
@@ -416,6 +425,7 @@ def run_figure(number, out_dir, preset: str = "default", with_mc: bool = True, f
     wall = time.perf_counter() - t_start
     sidecar = {
         "figure": spec.number, "status": "finished", "kind": spec.kind, "title": spec.title,
+        "paper": PAPER, "paper_readings": READINGS,
         "caption": caption, "claim": spec.claim, "choices": list(spec.choices), "in_paper_mc": spec.in_paper_mc,
         "preset": preset, "monte_carlo": bool(with_mc), "spec_hash": spec_hash,
         "methods": {"analytic": list(ANALYTIC_METHODS), "analytic_points": ANALYTIC_POINTS,
@@ -471,7 +481,10 @@ def disagreements(spec: FigureSpec, metrics: list[dict], claims: list[dict]) -> 
 def render_caption(spec: FigureSpec, metrics: list[dict], with_mc: bool, preset: str,
                    notes: list[str] | None = None) -> str:
     """The caption under the figure: what is drawn, our choices, the L1 distances and the disagreements."""
-    parts = [f"Fig. {spec.number} (reproduction, preset '{preset}'). The paper: " + spec.claim]
+    from vibro.references import PAPER_TITLE, READINGS
+
+    parts = [f"Fig. {spec.number} of \"{PAPER_TITLE}\", reproduced (preset '{preset}'; our readings of the paper: "
+             f"{READINGS}). The paper: " + spec.claim]
     parts += list(spec.choices)
     if spec.kind == "energy":
         parts.append("Lines: averaging, solid = paper method (eq. 30), dashed = jump method; symbols: Monte Carlo; "

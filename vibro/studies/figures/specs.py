@@ -14,11 +14,11 @@ from dataclasses import asdict, dataclass, field
 from hybrid.errors import ParameterError
 
 VDP_READING = "van-der-pol"
-"""Example 2 damping reading used by every Example 2 figure (NOTES.md): h = (c1 + c2 x**2) y."""
+"""Example 2 damping reading used by every Example 2 figure (docs/paper-readings.md): h = (c1 + c2 x**2) y."""
 
 VDP_CHOICE = (
-    "Example 2 damping: van der Pol reading h = (c1 + c2 x^2) y with c1 = -0.01, c2 = 0.005 (NOTES.md). The printed "
-    "h = (c1 - c2 x^2) y is negative everywhere and has no limit cycle, which contradicts Figs. 15-16."
+    "Example 2 damping: van der Pol reading h = (c1 + c2 x^2) y with c1 = -0.01, c2 = 0.005 (docs/paper-readings.md). "
+    "The printed h = (c1 - c2 x^2) y is negative everywhere and has no limit cycle, which contradicts Figs. 15-16."
 )
 
 
@@ -187,9 +187,11 @@ class FigureSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 """Bumped when the outputs change (file shape, or the numbers of the analytic curves), so that older finished
-figures are recomputed; Monte Carlo runs stay reused from their own cache. 4: the jump method's tail near h_max."""
+figures are recomputed; Monte Carlo runs stay reused from their own cache. 4: the jump method's tail near h_max.
+5: fonts of at least 9 pt, labelled colour bars beside the panels; the Monte Carlo cache holds npz + JSON, no
+pickles (old .pkl entries are never loaded, so those runs are redone)."""
 
 
 def _sizes(default_paths: int, default_t: float, burn: float, quick_t: float = 60.0, full_factor: int = 8):

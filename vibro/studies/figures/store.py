@@ -1,5 +1,8 @@
 """Crash-safe outputs: temp names and atomic renames, the sidecar written last, and a Monte Carlo cache.
 
+The cache holds numbers only (``.npz`` read with ``allow_pickle=False``, and JSON): the output folder may be shared,
+and unpickling a file runs whatever code it names, so a pickle planted there would run as the user.
+
 A figure counts as finished only when its sidecar JSON exists, carries the current spec hash, and every output it
 lists exists with the recorded SHA-256. PNG and CSV are written to temporary names and renamed; the sidecar is
 renamed last. An interrupted run therefore leaves either a finished figure or no sidecar at all.
@@ -9,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import pickle
 from pathlib import Path
 
 from hybrid.io import atomic_write as _atomic_write
@@ -92,20 +94,28 @@ def finished(sidecar, spec_hash: str) -> bool:
 
 
 class MCCache:
-    """A directory of pickled Monte Carlo results keyed by a hash of (model, settings, seed).
+    """A directory of Monte Carlo results (tuples of ``EnsembleStatistics``) keyed by a hash of (model, settings, seed).
 
-    Figures that simulate the same case with the same settings (Fig. 2 and Figs. 3-5) share one run.
-    Entries are written atomically; an unreadable entry is treated as missing.
+    Figures that simulate the same case with the same settings (Fig. 2 and Figs. 3-5) share one run. Each entry is
+    ``mc-KEY.npz`` (the arrays of every run, loaded with ``allow_pickle=False``) beside ``mc-KEY.json`` (the payload
+    it was made for and the number of runs; written last, so an entry without it is incomplete). Entries are written
+    atomically; an unreadable or mismatching entry is treated as missing.
 
     Examples
     --------
     >>> import tempfile
+    >>> from hybrid.stochastic import EnsembleStatistics
+    >>> s = EnsembleStatistics.empty({"h_max": 4.0, "bins": 4, "xy_bins": None, "v_max": 2.0, "v_bins": 2,
+    ...                               "seed": 1, "t_sample": 1.0, "chunk_paths": 1})
     >>> c = MCCache(tempfile.mkdtemp())
     >>> c.get({"a": 1}) is None
     True
-    >>> c.put({"a": 1}, [1, 2]); c.get({"a": 1})
-    [1, 2]
+    >>> c.put({"a": 1}, (s, s)); [r.h_counts.tolist() for r in c.get({"a": 1})]
+    [[0, 0, 0, 0], [0, 0, 0, 0]]
     """
+
+    FORMAT = 1
+    """Version of the entry layout; an entry of another version is ignored."""
 
     def __init__(self, directory):
         self.directory = Path(directory)
@@ -115,24 +125,40 @@ class MCCache:
         """Hash of a JSON-serialisable payload."""
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:24]
 
-    def _path(self, payload):
-        return self.directory / f"mc-{self.key(payload)}.pkl"
+    def _paths(self, payload):
+        stem = self.directory / f"mc-{self.key(payload)}"
+        return stem.with_suffix(".npz"), stem.with_suffix(".json")
 
     def get(self, payload):
-        """The cached object for ``payload``, or None."""
-        p = self._path(payload)
-        if not p.is_file():
-            return None
+        """The cached tuple of ``EnsembleStatistics`` for ``payload``, or None."""
+        import numpy as np
+
+        from hybrid.stochastic import EnsembleStatistics
+
+        npz, meta = self._paths(payload)
         try:
-            with open(p, "rb") as fh:
-                return pickle.load(fh)
-        except Exception:  # a stale or foreign pickle: recompute
+            info = json.loads(meta.read_text(encoding="utf-8"))
+            expected = json.loads(json.dumps(payload, sort_keys=True, default=str))
+            if info.get("format") != self.FORMAT or info.get("payload") != expected:
+                return None
+            with np.load(npz, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+            runs = []
+            for i in range(int(info["runs"])):
+                prefix = f"run{i}__"
+                runs.append(EnsembleStatistics.from_arrays(
+                    {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}))
+            return tuple(runs)
+        except Exception:  # missing, stale, truncated or foreign entry: recompute
             return None
 
-    def put(self, payload, obj) -> None:
-        """Store ``obj`` for ``payload`` (silently skipped if the object cannot be pickled)."""
-        try:
-            blob = pickle.dumps(obj)
-        except Exception:
-            return
-        atomic_write(self._path(payload), lambda tmp: Path(tmp).write_bytes(blob))
+    def put(self, payload, runs) -> None:
+        """Store the tuple ``runs`` of ``EnsembleStatistics`` for ``payload``."""
+        import numpy as np
+
+        npz, meta = self._paths(payload)
+        arrays = {f"run{i}__{k}": np.asarray(v) for i, r in enumerate(runs) for k, v in r.to_arrays().items()}
+        info = {"format": self.FORMAT, "runs": len(runs),
+                "payload": json.loads(json.dumps(payload, sort_keys=True, default=str))}
+        atomic_write(npz, lambda tmp: np.savez(tmp, **arrays))
+        write_json(meta, info)  # last: the entry is complete
