@@ -205,7 +205,7 @@ class Discretisation:
         ring = grid.ring
         cells = coef.at(grid.H_c[ring], grid.psi)
         self.cell = cells
-        self.mass_weight = grid.dH[ring] * grid.width / cells["w"]
+        self.mass_weight = grid.dH[ring] * grid.area_width / cells["w"]
         s2c = cells["s2"]
         Gpsi = _gradient_psi(grid)
         GH = _gradient_H(grid)

@@ -85,6 +85,28 @@ class RingGrid:
         self.psi = 0.5 * (self.lo + self.hi)
         self.width = self.hi - self.lo
         self.n = len(self.lo)
+        # Mass weights: a wall cuts a ring along arccos(|U|/r(H)), which has a square-root onset at the wall
+        # energy; the cut at the ring centre would make the ring's area (so p(H)) O(dH**1.5) wrong. The area
+        # uses the ring average of the cut angle instead (Gauss-Legendre in s = sqrt(H - H_w), exact onset).
+        self.area_width = self.width.copy()
+        for side in ("right", "left"):
+            rings, cin, cout = (np.array(v, dtype=int) for v in self._wall[side])
+            if len(rings) == 0:
+                continue
+            shift = self._mean_wall_angle(side, rings) - self.wall_angle(side, self.H_c[rings])
+            self.area_width[cin] -= shift
+            self.area_width[cout] -= shift
+
+    def _mean_wall_angle(self, side, rings, nodes: int = 8):
+        """Average over each ring's energies of the wall's half-angle arccos(|U| / r(H))."""
+        Hw = self.walls[side]
+        t, w = np.polynomial.legendre.leggauss(nodes)
+        sa = np.sqrt(np.maximum(self.H_faces[rings] - Hw, 0.0))
+        sb = np.sqrt(np.maximum(self.H_faces[rings + 1] - Hw, 0.0))
+        s = 0.5 * (sa + sb)[:, None] + 0.5 * (sb - sa)[:, None] * t
+        H = Hw + s * s
+        integral = np.sum(self.wall_angle(side, H) * 2.0 * s * w, axis=1) * 0.5 * (sb - sa)
+        return integral / (self.H_faces[rings + 1] - self.H_faces[rings])
 
     def wall_angle(self, side: str, H):
         """Half-width arccos(|U|/r) of the forbidden arc of ``side`` at energies H (0 below the wall energy)."""

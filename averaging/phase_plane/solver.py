@@ -142,7 +142,7 @@ class PhaseDensity:
     def joint(self, x, y):
         """p(x, y) on the grid x (nx) by y (ny) -> array (ny, nx); 0 outside the walls and above h_max.
 
-        Piecewise constant on the solver's cells.
+        Linear in H between the cells of neighbouring rings at the same angle, piecewise constant in angle.
 
         Examples
         --------
@@ -159,10 +159,21 @@ class PhaseDensity:
         H = 0.5 * YY**2 + G
         psi = np.arctan2(YY, u)
         psi = np.where(psi < -0.5 * np.pi, psi + 2 * np.pi, psi)
-        k = self.grid.locate(H, psi)
+        g = self.grid
+        k = g.locate(H, psi)
         lo, hi = self.walls
         inside = (k >= 0) & (XX >= (lo if lo is not None else -np.inf)) & (XX <= (hi if hi is not None else np.inf))
-        return np.where(inside, self.cell_p[np.maximum(k, 0)], 0.0)
+        kk = np.maximum(k, 0)
+        ring = g.ring[kk]
+        Hc = g.H_c[ring]
+        other = np.where(H > Hc, ring + 1, ring - 1)
+        other = np.where(other < 0, 1, other)  # extrapolate from rings 0 and 1 down to H = 0
+        other = np.clip(other, 0, g.n_rings - 1)
+        k2 = g.locate(g.H_c[other], psi)
+        ok = inside & (k2 >= 0) & (other != ring)
+        t = np.where(ok, (H - Hc) / np.where(ok, g.H_c[other] - Hc, 1.0), 0.0)
+        val = (1.0 - t) * self.cell_p[kk] + t * self.cell_p[np.maximum(k2, 0)]
+        return np.where(inside, val, 0.0)
 
     def _x_range(self):
         lo, hi = self.walls
