@@ -55,7 +55,7 @@ def main(argv=None):
     print(f"{'case':7s} {'label':10s} {'paper':>7s} {'jump':>7s} {'fpk':>7s} {'noise':>7s} | {'t_paper':>7s} "
           f"{'t_jump':>7s} {'t_fpk':>7s} | {'E[H] fpk':>9s} {'E[H] MC':>15s} {'est':>7s}")
     rows = []
-    for key, n, case, dt, burn in cases():
+    for key, n, case, dt, burn in cases(equilibrium=False):
         if only and key not in only:
             continue
         if key + "_a" not in store:
@@ -76,9 +76,10 @@ def main(argv=None):
                 sd = stationary_density_xy(model, h_max=case.h_max, **kw)
         tf = time.perf_counter() - t0
         l1f = float(np.abs(sd.bin_masses(edges) - mc).sum())
+        centres = 0.5 * (edges[1:] + edges[:-1])
+        e_mc = float(np.sum(mc * centres))
         info = store[key + "_info"]
-        e_mc = 0.5 * (info[5] + info[7])
-        ci = 0.5 * np.hypot(info[6], info[8])
+        ci = 0.5 * np.hypot(info[6], info[8]) / np.sqrt(float(store.get(key + "_pairs", [1])[0]))
         est = sd.error_estimate if sd.error_estimate is not None else float("nan")
         print(f"{key:7s} {case.label:10s} {res['paper'][0]:7.4f} {res['jump'][0]:7.4f} {l1f:7.4f} {noise:7.4f} | "
               f"{res['paper'][1]:7.3f} {res['jump'][1]:7.3f} {tf:7.3f} | {sd.mean_energy:9.5f} "
@@ -90,5 +91,53 @@ def main(argv=None):
               f"{np.median(r[:, 3]):7.4f} | worst fpk {r[:, 2].max():.4f}, max time {r[:, 4].max():.2f} s")
 
 
+def equilibrium_cases(grid=None):
+    """E[H] of fpk for the linear oscillator with one wall at x = 0 against Monte Carlo at dt and dt/2."""
+    from benchmarks.mc_references import EQ_RESTITUTION, eq_model
+    from models import ImpactOscillator
+
+    store = dict(np.load(DATA))
+    print("\nlinear oscillator, c = 0.05, D = 0.05, one wall at the equilibrium (Newton r); E[H]:")
+    print(f"{'r':>4s} {'fpk':>8s} {'t_fpk':>6s} {'MC dt=0.01':>17s} {'MC dt=0.005':>17s} {'fpk-MC(dt/2)':>12s}")
+    for r in EQ_RESTITUTION:
+        lin = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=None)
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sd = stationary_density_xy(lin, h_max=2.5, walls=(None, 0.0), restitution=eq_model(r).restitution,
+                                       **({} if grid is None else {"grid": grid}))
+        tf = time.perf_counter() - t0
+        out = []
+        for suffix in ("", "_half"):
+            E = store[f"eq{r}{suffix}_E"]
+            out.append((E.mean(), 2.13 * E.std(ddof=1) / np.sqrt(len(E))))  # t(0.975, 15)
+        (e1, c1), (e2, c2) = out
+        print(f"{r:4.1f} {sd.mean_energy:8.5f} {tf:6.2f} {e1:9.5f}±{c1:.5f} {e2:9.5f}±{c2:.5f} "
+              f"{100 * (sd.mean_energy / e2 - 1):+10.2f} %  (est. L1 {sd.error_estimate:.4f})")
+
+
+def dt_bias():
+    """L1 between the Monte Carlo references at dt and dt/2, with their noise, and fpk against each."""
+    from benchmarks.mc_references import HALF_DT_CASES
+
+    store = dict(np.load(DATA))
+    print("\nMonte Carlo dt bias (100 bins): L1(MC dt, MC dt/2), noise of each; fpk against each")
+    for key, n, case, dt, burn in cases(equilibrium=False):
+        if key not in HALF_DT_CASES or key + "_half_a" not in store:
+            continue
+        a, na = mc_masses(store, key)
+        b, nb = mc_masses(store, key + "_half")
+        edges = np.linspace(0.0, case.h_max, BINS + 1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sd = solve_phase_plane(case.build(), h_max=case.h_max)
+        m = sd.bin_masses(edges)
+        print(f"{key:7s} dt={dt:g}: L1(dt, dt/2)={np.abs(a - b).sum():.4f} noise {na:.4f}/{nb:.4f}; "
+              f"fpk-MC(dt)={np.abs(m - a).sum():.4f} fpk-MC(dt/2)={np.abs(m - b).sum():.4f}")
+
+
 if __name__ == "__main__":
     main()
+    if "--cases" not in sys.argv:
+        equilibrium_cases()
+        dt_bias()

@@ -167,12 +167,14 @@ def _gradient_H(grid: RingGrid):
 
 
 def _impact_weights(grid: RingGrid, side: str, law, rings, n_sub: int = 16):
-    """Matrix (len(rings), len(rings)): share of ring i's wall flux re-entering in ring j (both above the wall).
+    """Matrices (len(rings), len(rings)) mapping ring i's wall flux onto rings j (both above the wall).
 
-    The flux is taken uniform in H across the incoming ring (the exit flux per unit H is p at the wall),
-    split into ``n_sub`` slices mapped by H -> H_w + e(v)**2 (H - H_w), v = sqrt(2 (H - H_w)); each slice's image
-    is spread uniformly over its energy interval. Rows sum to 1 exactly (renormalised), which keeps the
-    discrete probability conserved.
+    The exit flux per unit H at the wall is p, reconstructed linearly across the incoming ring,
+    p_i + s_i (H - H_i). The ring is cut into ``n_sub`` slices mapped by H -> H_w + e(v)**2 (H - H_w),
+    v = sqrt(2 (H - H_w)); each slice's image is spread uniformly over its energy interval. ``W0[i, j]`` is
+    the share of the constant part (rows sum to 1 exactly) and ``W1[i, j]`` the integral of (H - H_i) over the
+    slices landing in j (rows sum to 0): the linear part moves probability between target rings but never
+    creates or destroys it, so conservation stays exact while the injected energy is second-order accurate.
     """
     Hw = grid.walls[side]
     faces = grid.H_faces[rings[0]:rings[-1] + 2]  # the rings above the wall are contiguous
@@ -189,17 +191,25 @@ def _impact_weights(grid: RingGrid, side: str, law, rings, n_sub: int = 16):
     width = b - a
     wide = width > 1e-12 * np.maximum(b, 1e-300)
     F = np.clip((faces[None, None, :] - a[..., None]) / np.where(wide, width, 1.0)[..., None], 0.0, 1.0)
-    share = np.where(wide[..., None], np.diff(F, axis=2), 0.0).sum(axis=1)
+    per_slice = np.where(wide[..., None], np.diff(F, axis=2), 0.0)  # (ring, slice, target)
     # zero-width slices (e v constant) land in one ring
     k = np.clip(np.searchsorted(faces, a, side="right") - 1, 0, len(rings) - 1)
-    np.add.at(share, (np.broadcast_to(np.arange(len(rings))[:, None], a.shape)[~wide], k[~wide]), 1.0)
-    return share / share.sum(axis=1, keepdims=True)
+    ii, ss = np.nonzero(~wide)
+    per_slice[ii, ss, k[ii, ss]] = 1.0
+    per_slice /= per_slice.sum(axis=2, keepdims=True)
+    dh = np.diff(h, axis=1)
+    centre = grid.H_c[rings][:, None]
+    moment = 0.5 * ((h[:, 1:] - centre) ** 2 - (h[:, :-1] - centre) ** 2)  # int (H - H_i) dH per slice
+    W0 = np.einsum("is,isj->ij", dh, per_slice) / dh.sum(axis=1, keepdims=True)
+    W1 = np.einsum("is,isj->ij", moment, per_slice)
+    W1 -= W1.sum(axis=1, keepdims=True) * W0  # exact zero row sums (round-off)
+    return W0, W1
 
 
 class Discretisation:
     """The assembled operator on a :class:`RingGrid` (rows = net outflow of each cell)."""
 
-    def __init__(self, grid: RingGrid, coef: Coefficients, law):
+    def __init__(self, grid: RingGrid, coef: Coefficients, law, impact_order: int = 2, phase_order: int = 1):
         self.grid, self.coef = grid, coef
         n = grid.n
         ring = grid.ring
@@ -247,7 +257,20 @@ class Discretisation:
         dH = grid.dH[ri]
         m_ang = len(L)
         ar = np.arange(m_ang)
-        conv = sps.csr_matrix((dH * a, (ar, up)), shape=(m_ang, n))
+        if phase_order == 1:
+            conv = sps.csr_matrix((dH * a, (ar, up)), shape=(m_ang, n))
+        else:
+            prev, nxt, _, _ = grid.neighbours()
+            down = np.where(a < 0, L, R)
+            far = np.where(a < 0, nxt[R], prev[L])  # the cell upstream of the upwind cell
+            uniform = np.isclose(grid.width[up], grid.width[down]) & (far >= 0)
+            uniform &= np.isclose(grid.width[np.maximum(far, 0)], grid.width[up])
+            kap = 1.0 / 3.0
+            cu = np.where(uniform, 1.0 - 0.25 * (1 + kap) + 0.25 * (1 - kap), 1.0)
+            cd = np.where(uniform, 0.25 * (1 + kap), 0.0)
+            cf = np.where(uniform, -0.25 * (1 - kap), 0.0)
+            conv = sps.csr_matrix((np.r_[dH * a * cu, dH * a * cd, dH * a * cf],
+                                   (np.r_[ar, ar, ar], np.r_[up, down, np.maximum(far, 0)])), shape=(m_ang, n))
         coef_d = dH * q / g["w"]
         diff_psi = sps.csr_matrix((np.r_[-0.5 * q * coef_d / dist * s2c[R], 0.5 * q * coef_d / dist * s2c[L]],
                                    (np.r_[ar, ar], np.r_[R, L])), shape=(m_ang, n))
@@ -270,11 +293,23 @@ class Discretisation:
             rings_in, cin, cout = grid.wall_cells(side)
             if len(rings_in) == 0:
                 continue
-            W = _impact_weights(grid, side, law, rings_in)
+            W, W1 = _impact_weights(grid, side, law, rings_in)
             out = grid.dH[rings_in]
             rows.append(cin), cols.append(cin), vals.append(out)
             jj, kk = np.nonzero(W.T)  # target row jj (ring index in rings_in), source kk
             rows.append(cout[jj]), cols.append(cin[kk]), vals.append(-out[kk] * W.T[jj, kk])
+            if impact_order == 2 and len(rings_in) > 2:
+                # slope of the wall flux density across rings: central, one-sided at the ends
+                m = len(rings_in)
+                Hr = grid.H_c[rings_in]
+                lo_n = np.r_[0, np.arange(m - 2), m - 2]
+                hi_n = np.r_[1, np.arange(2, m), m - 1]
+                inv = 1.0 / (Hr[hi_n] - Hr[lo_n])
+                for src, sgn in ((hi_n, 1.0), (lo_n, -1.0)):
+                    # W1[k, j] * s_k: s_k = (p[cin[hi_n[k]]] - p[cin[lo_n[k]]]) * inv[k]
+                    jj1, kk1 = np.nonzero(W1.T)
+                    rows.append(cout[jj1]), cols.append(cin[src[kk1]])
+                    vals.append(-sgn * W1.T[jj1, kk1] * inv[kk1])
             self.walls[side] = (rings_in, cin, cout, W)
         if rows:
             A = A + sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))

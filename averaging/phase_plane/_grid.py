@@ -28,16 +28,25 @@ class RingGrid:
     n_energy, n_phase : int
     walls : dict
         ``{"right": H_R, "left": H_L}`` wall energies (missing key: no wall on that side).
+    stretch : float
+        theta in (0, 1]: ratio of the ring width at H = 0 to the uniform width h_max / n_energy.
     """
 
-    def __init__(self, h_max: float, n_energy: int, n_phase: int, walls: dict):
+    def __init__(self, h_max: float, n_energy: int, n_phase: int, walls: dict, stretch: float = 1.0):
         self.h_max = float(h_max)
         self.walls = dict(walls)
-        breaks = sorted({0.0, self.h_max} | {float(h) for h in walls.values() if 0.0 < h < self.h_max})
-        spans = np.diff(breaks)
-        counts = np.maximum(1, np.round(n_energy * spans / self.h_max).astype(int))
-        faces = [np.linspace(a, b, k + 1)[:-1] for a, b, k in zip(breaks[:-1], breaks[1:], counts)]
-        self.H_faces = np.concatenate(faces + [[self.h_max]])
+        # Ring faces H = h_max (theta t + (1 - theta) t**2) on uniform t: rings near H = 0, where the density
+        # lives, are 1/theta times finer than near h_max (theta = 1: uniform). Each wall energy replaces the
+        # nearest face, so no ring straddles a grazing orbit.
+        t = np.linspace(0.0, 1.0, n_energy + 1)
+        faces = self.h_max * (stretch * t + (1.0 - stretch) * t * t)
+        for h in sorted(float(v) for v in walls.values() if 0.0 < v < self.h_max):
+            k = int(np.argmin(np.abs(faces - h)))
+            if k in (0, n_energy) or faces[k] in walls.values():
+                faces = np.sort(np.append(faces, h))
+            else:
+                faces[k] = h
+        self.H_faces = np.unique(faces)
         self.H_c = 0.5 * (self.H_faces[1:] + self.H_faces[:-1])
         self.dH = np.diff(self.H_faces)
         self.n_rings = len(self.H_c)

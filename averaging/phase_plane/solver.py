@@ -18,6 +18,7 @@ from ._grid import RingGrid
 DEFAULT_GRID = (160, 192)
 """(rings in H, angles per ring): L1 discretisation error of p(H) below 1e-3 on the paper's cases."""
 L1_BINS = 100
+DEFAULT_STRETCH = 0.4
 
 
 class GridWarning(UserWarning):
@@ -273,7 +274,8 @@ def _walls(model, walls):
 
 
 def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model", restitution=None,
-                      points: int = 2000) -> PhaseDensity:
+                      points: int = 2000, *, impact_order: int = 2, phase_order: int = 3,
+                      stretch: float = DEFAULT_STRETCH) -> PhaseDensity:
     """One solve on one grid, no accuracy check: the lower-level entry (walls given by position).
 
     Parameters
@@ -319,8 +321,10 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
         wall_H["right"] = float(model.potential(np.array([right]))[0])
     if left is not None:
         wall_H["left"] = float(model.potential(np.array([left]))[0])
-    g = RingGrid(h_max, n_e, n_p, wall_H)
-    disc = Discretisation(g, _coefficients(model, law), law.coefficient)
+    if not 0.0 < stretch <= 1.0:
+        raise ParameterError(f"stretch={stretch!r} must lie in (0, 1]")
+    g = RingGrid(h_max, n_e, n_p, wall_H, stretch)
+    disc = Discretisation(g, _coefficients(model, law), law.coefficient, impact_order, phase_order)
     t1 = time.perf_counter()
     p = disc.solve()
     t2 = time.perf_counter()
