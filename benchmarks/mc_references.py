@@ -25,7 +25,7 @@ PATHS = 32          # paths per half
 T_SAMPLE = 6000.0   # recorded time per path
 BINS = 400
 BIAS_CASES = ("f2_1", "f12_0", "f14_0")
-HALF_DT_CASES = ("f2_0", "f6_0", "f11_0", "f12_0", "f14_0", "eq0.8", "eq0.6")  # rerun at dt/2 with as many pairs: the dt bias
+HALF_DT_CASES = ("f2_0", "f6_0", "f11_0", "f12_0", "f12_2", "f14_0", "eq0.8", "eq0.6")  # rerun at dt/2 with as many pairs: the dt bias
 NOISE_GOAL = 0.0025  # L1 noise aimed at on 100 bins
 MAX_FACTOR = 8      # at most 8 pairs of halves per case
 

@@ -157,3 +157,23 @@ def test_output_conventions():
     assert set(sd.joint_to_pandas().columns) == {"x", "y", "p"}
     assert sd.mean_energy > 0 and 0 < sd.prob_below_barrier < 1
     _ = Elastic  # imported for symmetry with the oracles module
+
+
+@pytest.mark.slow
+def test_grid_convergence_orders():
+    # benchmarks/fpk_convergence.py: the scheme is second order in the ring width except at isolated cells
+    # (grazing ring, arc ends), so the fitted orders must clearly exceed 1 (measured 2.15 and 1.75).
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from fpk_convergence import GRIDS, elastic, successive
+
+    errs, order = elastic(GRIDS)
+    assert order > 1.5 and errs[-1] < 1e-4
+    from averaging.figures.specs import FIGURES
+
+    case = FIGURES[2].cases[1]
+    edges = np.linspace(0.0, case.h_max, EDGES_BINS + 1)
+    _, diffs, order = successive(
+        lambda g: solve_phase_plane(case.build(), grid=g, h_max=case.h_max).bin_masses(edges), GRIDS)
+    assert order > 1.5 and diffs[-1] < 5e-4
