@@ -19,8 +19,10 @@ tangent to one family of cell faces:
   has unit Jacobian from (u, y), so the free flow is a rotation psi' = -w(x), w = g(x)/u, along the circles
   H = const, and the conservative flux in psi of the physical density p is exactly -p.
 * Cells are rings H_i < H < H_{i+1} split in psi. Faces between rings are orbits: the convection never
-  crosses them, so its (first-order upwind) numerical diffusion acts along the orbit only, where it does not
-  move probability between energies. Energy exchange between rings (the damping drift and the noise) is a
+  crosses them, so its numerical diffusion acts along the orbit only, where it does not move probability
+  between energies. Along the orbit the convection is upwind-biased third order (kappa = 1/3, linear, so no
+  nonlinear iteration; first order next to arc ends), which keeps the jump of p at the wall sharp. Rings are
+  stretched, H = h_max (theta t + (1 - theta) t**2), theta = 0.4, finer where the density lives. Energy exchange between rings (the damping drift and the noise) is a
   drift-diffusion in H, discretised by Scharfetter-Gummel exponential fitting: positive, second order, and
   exact for the Gibbs density exp(-cH/D) of linear damping with additive noise (the drift/diffusion ratio
   -c/D is constant in H). The mixed derivatives of the rank-one noise tensor are central differences.
@@ -28,15 +30,16 @@ tangent to one family of cell faces:
   G(w) at psi = +-arccos(|U|/r). Ring faces are put at the wall energies, and the arcs end at the cut. The
   flux reaching the wall from a ring is exactly p dH (the flux y p dy of the wall, since y dy = dH at fixed
   x); it is removed from the incoming cell and re-injected into the outgoing cells of the rings that contain
-  H' = G(w) + e(v)**2 (H - G(w)), v = sqrt(2 (H - G(w))), slice by slice (any e(v), even non-monotone e v).
+  H' = G(w) + e(v)**2 (H - G(w)), v = sqrt(2 (H - G(w))), slice by slice (any e(v), even non-monotone e v),
+  with the wall flux reconstructed linearly across rings (second order; the linear part has zero sum).
   Every flux leaves one cell and enters another, so the discrete probability is conserved to round-off.
-* The stationary vector is the null vector of the sparse operator, computed by one sparse LU solve with one
-  equation replaced by the normalisation (the replaced equation is implied by conservation).
+* The stationary vector is the null vector of the sparse operator, computed by one sparse LU solve (minimum
+  degree ordering of A + A^T) with one equation replaced by the normalisation (implied by conservation).
 
-Errors: second order in the ring width ΔH (fitted orders 1.8-2 on the elastic density and on an impact case,
-see ``benchmarks/density_accuracy.py``); first order in the angle step only through the orbit-wise smearing
-of p, which changes p(H) at second order. The outer ring at ``h_max`` is a reflecting boundary: choose h_max
-in the tail.
+Errors (``benchmarks/fpk_convergence.py``, both grid directions refined together): fitted order 2.15 for p(H)
+on the exact elastic density, 1.75 on Fig. 2 (Ma, delta = 1); 1.3 for E[H] with a wall at the equilibrium
+(the wall meets the equilibrium at a corner of the domain). The outer ring at ``h_max`` is reflecting: choose
+h_max in the tail (a warning says when it is not).
 
 Examples
 --------
@@ -49,6 +52,9 @@ Examples
 
 from __future__ import annotations
 
-from .solver import PhaseDensity, solve_phase_plane, stationary_density_xy
+from .solver import DEFAULT_GRID, GridWarning, PhaseDensity, solve_phase_plane, stationary_density_xy
 
-__all__ = ["PhaseDensity", "solve_phase_plane", "stationary_density_xy"]
+METHOD = "fpk"
+"""Name of this method family (beside the averaging methods ``paper``, ``exact-two-impact``, ``jump``)."""
+
+__all__ = ["DEFAULT_GRID", "METHOD", "GridWarning", "PhaseDensity", "solve_phase_plane", "stationary_density_xy"]

@@ -257,10 +257,12 @@ def _coefficients(model, law):
 
 
 def _walls(model, walls):
-    if walls == "model" or walls is None and False:
+    if isinstance(walls, str) and walls == "model":
         left, right = model.barriers
         left = None if not np.isfinite(left) else float(left)
         right = None if not np.isfinite(right) else float(right)
+    elif walls is None:
+        left, right = None, None
     else:
         try:
             left, right = walls
@@ -287,8 +289,8 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
         Rings in energy on [0, h_max] and angle cells per ring.
     h_max : float
         Upper energy (reflecting): choose it in the tail.
-    walls : 'model' or (left, right)
-        Wall positions, None for no wall on a side; left <= 0 <= right. A wall at x = 0 is allowed (a barrier
+    walls : 'model', None or (left, right)
+        Wall positions from the model, no walls, or given (None for no wall on a side); left <= 0 <= right. A wall at x = 0 is allowed (a barrier
         at the equilibrium), as is a single wall.
     restitution : RestitutionLaw or None
         Overrides the model's law.
