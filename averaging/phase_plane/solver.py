@@ -1,0 +1,406 @@
+"""Public entry points of the phase-plane solver: :func:`stationary_density_xy` and :func:`solve_phase_plane`."""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+import sympy as sp
+from scipy.interpolate import PchipInterpolator
+
+from hybrid.errors import ModelError, NormalisationError, ParameterError
+from models import X, Y
+
+from ._core import Coefficients, Discretisation
+from ._grid import RingGrid
+
+DEFAULT_GRID = (160, 192)
+"""(rings in H, angles per ring): L1 discretisation error of p(H) below 1e-3 on the paper's cases."""
+L1_BINS = 100
+DEFAULT_STRETCH = 0.4
+
+
+class GridWarning(UserWarning):
+    """The grid is too coarse for the requested accuracy (the message gives the estimated L1 error)."""
+
+
+class PhaseDensity:
+    """The stationary density of the (x, y) problem on the energy-angle grid, and what follows from it.
+
+    Built by :func:`stationary_density_xy`. ``H`` and ``p`` follow :class:`averaging.StationaryDensity`: ``points``
+    energies on [0, h_max] and p(H) normalised to 1 there.
+
+    Attributes
+    ----------
+    method : str
+        ``"fpk"``.
+    H, p : ndarray
+        Energy grid and p(H) (derivative of a monotone interpolant of the exact cumulative ring masses).
+    H_faces, ring_mass : ndarray
+        Ring boundaries and the probability of each ring (sums to 1).
+    cell_H, cell_psi, cell_x, cell_y, cell_p, cell_mass : ndarray
+        Cell centres (energy, angle and the corresponding x, y), the density p(x, y) there and the cell masses.
+    mean_energy, mean_x2, mean_y2, prob_below_barrier : float
+    impact_rate : float
+        Impacts per unit time, both walls; ``impact_rates`` per wall.
+    residual : float
+        max |A p| / max(|A| |p|) of the discrete equation (round-off level when solved).
+    conservation : float
+        max |column sum| of the discrete operator (0 up to round-off: probability is conserved).
+    error_estimate : float or None
+        Estimated L1 error of p(H) on 100 bins (from a solve on a grid twice coarser), when checked.
+    timing : dict
+        Seconds spent assembling and solving.
+    """
+
+    method = "fpk"
+
+    def __init__(self, model, grid: RingGrid, disc: Discretisation, p, timing, walls):
+        self.model = model
+        self.grid = grid
+        self.h_max = grid.h_max
+        self.timing = timing
+        self.walls = walls
+        c = disc.cell
+        self.cell_H, self.cell_psi = grid.H_c[grid.ring], grid.psi
+        self.cell_x, self.cell_y = c["x"], c["y"]
+        self.cell_p = p
+        self.cell_mass = p * disc.mass_weight
+        self.H_faces = grid.H_faces
+        self.ring_mass = np.bincount(grid.ring, self.cell_mass, grid.n_rings)
+        Ap = disc.A @ p
+        scale = float(np.max(abs(disc.A) @ np.abs(p)))
+        self.residual = float(np.max(np.abs(Ap)) / scale) if scale > 0 else 0.0
+        self.conservation = float(np.max(np.abs(np.asarray(disc.A.sum(axis=0)))))
+        self._cdf = PchipInterpolator(grid.H_faces, np.concatenate([[0.0], np.cumsum(self.ring_mass)]))
+        self._pdf = self._cdf.derivative()
+        self.mean_energy = float(np.sum(self.cell_mass * self.cell_H))
+        self.mean_x2 = float(np.sum(self.cell_mass * self.cell_x**2))
+        self.mean_y2 = float(np.sum(self.cell_mass * self.cell_y**2))
+        wall_H = [h for h in grid.walls.values()]
+        Gw = min(wall_H) if wall_H else np.inf
+        self.prob_below_barrier = float(self._cdf(min(Gw, self.h_max)))
+        self.impact_rates = {}
+        self._impacts = {}
+        for side, (rings, cin, _cout, _W) in disc.walls.items():
+            Hw = grid.walls[side]
+            flux = p[cin]  # exit flux per unit H
+            self.impact_rates[side] = float(np.sum(flux * grid.dH[rings]))
+            self._impacts[side] = (np.sqrt(2.0 * (grid.H_c[rings] - Hw)), flux, grid.dH[rings])
+        self.impact_rate = float(sum(self.impact_rates.values()))
+        self.error_estimate = None
+        self.H = np.array([])
+        self.p = np.array([])
+
+    # ------------------------------------------------------------------ energy
+    def density(self, H):
+        """p(H) at arbitrary energies (0 outside [0, h_max]).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> float(sd.density([5.0])[0])
+        0.0
+        """
+        H = np.asarray(H, dtype=float)
+        inside = (H >= 0) & (H <= self.h_max)
+        return np.where(inside, np.maximum(self._pdf(np.clip(H, 0, self.h_max)), 0.0), 0.0)
+
+    def bin_masses(self, edges):
+        """Probability of each energy bin [edges[k], edges[k+1]] (exact ring masses, monotone interpolation).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> round(float(sd.bin_masses([0.0, 4.0]).sum()), 12)
+        1.0
+        """
+        edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_max)
+        return np.diff(self._cdf(edges))
+
+    # ------------------------------------------------------------------ impacts
+    def impact_speed_density(self, side: str = "right"):
+        """(v, f): impact speeds at wall ``side`` and their density (normalised to 1 over impacts).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> v, f = sd.impact_speed_density("left")
+        >>> bool(abs(np.sum(f[1:] * np.diff(v)) - 1) < 0.05)
+        True
+        """
+        if side not in self._impacts:
+            raise ParameterError(f"no wall on the {side!r} side; walls: {sorted(self._impacts)}")
+        v, flux, dH = self._impacts[side]
+        rate = float(np.sum(flux * dH))
+        return v, flux * v / rate  # dH = v dv
+
+    # ------------------------------------------------------------------ phase plane
+    def joint(self, x, y):
+        """p(x, y) on the grid x (nx) by y (ny) -> array (ny, nx); 0 outside the walls and above h_max.
+
+        Linear in H between the cells of neighbouring rings at the same angle, piecewise constant in angle.
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> sd.joint(np.linspace(-1, 1, 5), np.linspace(-2, 2, 3)).shape
+        (3, 5)
+        """
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        XX, YY = np.meshgrid(x, y)
+        G = self.model.potential(XX)
+        u = np.sign(XX) * np.sqrt(2.0 * np.maximum(G, 0.0))
+        H = 0.5 * YY**2 + G
+        psi = np.arctan2(YY, u)
+        psi = np.where(psi < -0.5 * np.pi, psi + 2 * np.pi, psi)
+        g = self.grid
+        k = g.locate(H, psi)
+        lo, hi = self.walls
+        inside = (k >= 0) & (XX >= (lo if lo is not None else -np.inf)) & (XX <= (hi if hi is not None else np.inf))
+        kk = np.maximum(k, 0)
+        ring = g.ring[kk]
+        Hc = g.H_c[ring]
+        other = np.where(H > Hc, ring + 1, ring - 1)
+        other = np.where(other < 0, 1, other)  # extrapolate from rings 0 and 1 down to H = 0
+        other = np.clip(other, 0, g.n_rings - 1)
+        k2 = g.locate(g.H_c[other], psi)
+        ok = inside & (k2 >= 0) & (other != ring)
+        t = np.where(ok, (H - Hc) / np.where(ok, g.H_c[other] - Hc, 1.0), 0.0)
+        val = (1.0 - t) * self.cell_p[kk] + t * self.cell_p[np.maximum(k2, 0)]
+        return np.where(inside, val, 0.0)
+
+    def _x_range(self):
+        lo, hi = self.walls
+        tl, tr = self.model.turning_points(self.h_max) if hasattr(self.model, "turning_points") else (-5, 5)
+        return (lo if lo is not None else float(tl)), (hi if hi is not None else float(tr))
+
+    def marginal_x(self, x, points: int = 801):
+        """p(x) = int p(x, y) dy (midpoint rule on ``points`` speeds).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> bool(sd.marginal_x(np.array([0.0]))[0] > 0)
+        True
+        """
+        x = np.atleast_1d(np.asarray(x, dtype=float))
+        ym = np.sqrt(2.0 * self.h_max)
+        e = np.linspace(-ym, ym, points + 1)
+        yc = 0.5 * (e[1:] + e[:-1])
+        return self.joint(x, yc).sum(axis=0) * (e[1] - e[0])
+
+    def marginal_y(self, y, points: int = 801):
+        """p(y) = int p(x, y) dx over the walls (midpoint rule on ``points`` positions).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> bool(sd.marginal_y(np.array([0.0]))[0] > 0)
+        True
+        """
+        y = np.atleast_1d(np.asarray(y, dtype=float))
+        a, b = self._x_range()
+        e = np.linspace(a, b, points + 1)
+        xc = 0.5 * (e[1:] + e[:-1])
+        return self.joint(xc, y).sum(axis=1) * (e[1] - e[0])
+
+    # ------------------------------------------------------------------ output
+    def to_pandas(self):
+        """DataFrame with columns H, p (metadata in ``.attrs``), as :meth:`averaging.StationaryDensity.to_pandas`."""
+        import pandas as pd
+
+        df = pd.DataFrame({"H": self.H, "p": self.p})
+        df.attrs.update(self.metadata())
+        return df
+
+    def joint_to_pandas(self, x=None, y=None):
+        """Long-format DataFrame x, y, p of :meth:`joint` (default 101 x 101 over the walls, |y| <= sqrt(2 h_max))."""
+        import pandas as pd
+
+        if x is None:
+            x = np.linspace(*self._x_range(), 101)
+        if y is None:
+            ym = np.sqrt(2.0 * self.h_max)
+            y = np.linspace(-ym, ym, 101)
+        XX, YY = np.meshgrid(x, y)
+        return pd.DataFrame({"x": XX.ravel(), "y": YY.ravel(), "p": self.joint(x, y).ravel()})
+
+    def metadata(self) -> dict:
+        """Method, model, grid and summary statistics (JSON-friendly)."""
+        return {
+            "method": self.method, "model": self.model.describe(), "h_max": self.h_max,
+            "grid": [int(self.grid.n_rings), int(round((2 * np.pi) / self.grid.dpsi))], "cells": int(self.grid.n),
+            "walls": list(self.walls), "mean_energy": self.mean_energy, "mean_x2": self.mean_x2,
+            "prob_below_barrier": self.prob_below_barrier, "impact_rate": self.impact_rate,
+            "residual": self.residual, "conservation": self.conservation, "error_estimate": self.error_estimate,
+        }
+
+    def __repr__(self) -> str:
+        return (f"PhaseDensity(model={self.model.name!r}, method='fpk', cells={self.grid.n}, "
+                f"E[H]={self.mean_energy:.6g}, impact_rate={self.impact_rate:.6g})")
+
+
+def _coefficients(model, law):
+    sub = model.substitute
+    m_nc = sp.lambdify((X, Y), sub(model.ito_drift + model.g), "numpy")
+    s2 = sp.lambdify((X, Y), sub(model.diffusion_squared), "numpy")
+    return Coefficients(model.restoring, model.potential, m_nc, s2, law.coefficient)
+
+
+def _walls(model, walls):
+    if isinstance(walls, str) and walls == "model":
+        left, right = model.barriers
+        left = None if not np.isfinite(left) else float(left)
+        right = None if not np.isfinite(right) else float(right)
+    elif walls is None:
+        left, right = None, None
+    else:
+        try:
+            left, right = walls
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"walls={walls!r} must be 'model' or a pair (left, right), None for no wall") from exc
+        left = None if left is None or not np.isfinite(left) else float(left)
+        right = None if right is None or not np.isfinite(right) else float(right)
+    if (left is not None and left > 0) or (right is not None and right < 0) or (left == 0 and right == 0):
+        raise ParameterError(f"walls ({left}, {right}) must satisfy left <= 0 <= right, not both at 0")
+    return left, right
+
+
+def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model", restitution=None,
+                      points: int = 2000, *, impact_order: int = 2, phase_order: int = 3,
+                      stretch: float = DEFAULT_STRETCH) -> PhaseDensity:
+    """One solve on one grid, no accuracy check: the lower-level entry (walls given by position).
+
+    Parameters
+    ----------
+    model : ImpactOscillator
+        Supplies g, G, the Itô drift and sigma**2 (Wong-Zakai term included) and, by default, the walls and
+        the restitution law.
+    grid : (int, int)
+        Rings in energy on [0, h_max] and angle cells per ring.
+    h_max : float
+        Upper energy (reflecting): choose it in the tail.
+    walls : 'model', None or (left, right)
+        Wall positions from the model, no walls, or given (None for no wall on a side); left <= 0 <= right.
+        A wall at x = 0 is allowed (a barrier at the equilibrium), as is a single wall.
+    restitution : RestitutionLaw or None
+        Overrides the model's law.
+    points : int
+        Energies of the output p(H) grid.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator, Newton
+    >>> lin = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=None)
+    >>> sd = solve_phase_plane(lin, grid=(60, 64), h_max=3.0, walls=(None, 0.0), restitution=Newton(0.8))
+    >>> sorted(sd.impact_rates), sd.impact_rate > 0
+    (['right'], True)
+    """
+    if not (np.isfinite(h_max) and h_max > 0):
+        raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
+    try:
+        n_e, n_p = (int(v) for v in grid)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"grid={grid!r} must be a pair (rings, angles) of integers") from exc
+    if n_e < 8 or n_p < 16:
+        raise ParameterError(f"grid={grid!r} too small: use at least (8, 16) (rings, angles)")
+    if int(points) != points or points < 3:
+        raise ParameterError(f"points={points!r} must be an integer >= 3")
+    law = restitution if restitution is not None else model.restitution
+    left, right = _walls(model, walls)
+    t0 = time.perf_counter()
+    wall_H = {}
+    if right is not None:
+        wall_H["right"] = float(model.potential(np.array([right]))[0])
+    if left is not None:
+        wall_H["left"] = float(model.potential(np.array([left]))[0])
+    if not 0.0 < stretch <= 1.0:
+        raise ParameterError(f"stretch={stretch!r} must lie in (0, 1]")
+    g = RingGrid(h_max, n_e, n_p, wall_H, stretch)
+    disc = Discretisation(g, _coefficients(model, law), law.coefficient, impact_order, phase_order)
+    t1 = time.perf_counter()
+    p = disc.solve()
+    t2 = time.perf_counter()
+    out = PhaseDensity(model, g, disc, p, {"assemble": t1 - t0, "solve": t2 - t1}, (left, right))
+    out.H = np.linspace(0.0, float(h_max), int(points))
+    out.p = out.density(out.H)
+    return out
+
+
+def _l1_bins(a: PhaseDensity, b: PhaseDensity, bins: int = L1_BINS) -> float:
+    edges = np.linspace(0.0, a.h_max, bins + 1)
+    return float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
+
+
+def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls="model", restitution=None,
+                          points: int = 2000, check: bool = True, tol: float = 0.005,
+                          order: float = 2.0) -> PhaseDensity:
+    """Stationary density p(x, y) of ``model`` with impact boundary conditions, and p(H), marginals, impacts.
+
+    Parameters
+    ----------
+    model : ImpactOscillator
+        Any g (single well), h, f_k / D_kl and restitution law; walls from the model or ``walls``.
+    grid : (int, int)
+        (rings in H, angle cells per ring); the cost grows like their product (about 1 s per 30 000 cells).
+    h_max : float
+        Upper end of the energy range (reflecting); mass above it is lost, so choose it in the tail.
+    walls, restitution, points
+        See :func:`solve_phase_plane`.
+    check : bool
+        Check confinement and estimate the discretisation error of p(H) (L1 on 100 bins) from a second solve
+        on a grid twice coarser (Richardson, ``order``); warn with :class:`GridWarning` when it exceeds ``tol``.
+    tol : float
+        Target L1 error of p(H) on 100 bins for the grid check.
+
+    Returns
+    -------
+    PhaseDensity
+
+    Raises
+    ------
+    NormalisationError
+        When the potential does not confine (no single well) or the density does not decay towards h_max
+        (energy grows without bound, or h_max far too small).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact, Ma
+    >>> sd = stationary_density_xy(DuffingImpact(restitution=Ma(0.4)), grid=(60, 64), check=False)
+    >>> list(sd.to_pandas().columns), round(float(sd.bin_masses([0, 4.0])[0]), 9)
+    (['H', 'p'], 1.0)
+    """
+    if check:
+        try:
+            model.check_single_well()
+        except ModelError as exc:
+            raise NormalisationError(f"no stationary density: {exc}") from exc
+    sd = solve_phase_plane(model, grid, h_max, walls, restitution, points)
+    if not check:
+        return sd
+    rho = sd.ring_mass / sd.grid.dH
+    if rho[-1] > 0.2 * rho.max():
+        raise NormalisationError(
+            f"p(H) does not decay towards h_max={h_max:g} (p(h_max)/max p = {rho[-1] / rho.max():.2g}): the energy "
+            "grows without bound (no confinement) or h_max is far too small; raise h_max or add dissipation"
+        )
+    tail = float(sd.ring_mass[sd.grid.H_c > 0.9 * h_max].sum())
+    if tail > 1e-4:
+        warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of [0, h_max={h_max:g}]: raise h_max",
+                      GridWarning, stacklevel=2)
+    coarse = solve_phase_plane(model, (max(8, grid[0] // 2), max(16, grid[1] // 2)), h_max, walls, restitution, 3)
+    est = _l1_bins(sd, coarse) / (2.0**order - 1.0)
+    sd.error_estimate = est
+    if est > tol:
+        warnings.warn(f"grid {tuple(grid)} too coarse: estimated L1 error of p(H) {est:.2g} > tol={tol:g} "
+                      "(from the solve on a grid twice coarser); refine the grid", GridWarning, stacklevel=2)
+    return sd

@@ -1,0 +1,82 @@
+"""Grid convergence of the ``fpk`` phase-plane solver, as fitted orders.
+
+1. Elastic Duffing between walls at +-1 (c = 0.1, D = 0.05): L1 of p(H) (100 bins) against the exact density
+   p ~ exp(-cH/D), conditioned on [0, h_max] (exact there: its cross-orbit flux vanishes).
+2. An impact case, Fig. 2 with delta = 1.0 (Ma, V_C = 0.4): successive differences L1(p_h, p_h/2); the order is
+   log2 of the ratio of successive differences.
+3. The equilibrium wall (linear, c = D = 0.05, Newton r = 0.6): successive differences of E[H].
+
+Both grid directions are refined together: (rings, angles) = (40, 48) * 2**k.
+Run: ``python benchmarks/fpk_convergence.py``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from averaging.phase_plane import solve_phase_plane  # noqa: E402
+
+GRIDS = [(40, 48), (80, 96), (160, 192), (320, 384)]
+
+
+def fitted_order(h, err):
+    """Least-squares slope of log err against log h."""
+    return float(np.polyfit(np.log(h), np.log(err), 1)[0])
+
+
+def elastic(grids=GRIDS):
+    from problems import elastic_duffing
+
+    model, ex = elastic_duffing(delta=1.0, c=0.1, D=0.05)
+    h_max = 6.0
+    edges = np.linspace(0.0, h_max, 101)
+    cdf = np.array([ex.probability_below(h) for h in edges]) / ex.probability_below(h_max)
+    errs = []
+    for g in grids:
+        t0 = time.perf_counter()
+        sd = solve_phase_plane(model, grid=g, h_max=h_max)
+        errs.append(float(np.abs(sd.bin_masses(edges) - np.diff(cdf)).sum()))
+        print(f"  elastic {g}: L1 = {errs[-1]:.2e} ({time.perf_counter() - t0:.2f} s)", flush=True)
+    return errs, fitted_order(1.0 / np.array([g[0] for g in grids]), errs)
+
+
+def successive(quantity, grids=GRIDS, label=""):
+    vals = []
+    for g in grids:
+        t0 = time.perf_counter()
+        vals.append(quantity(g))
+        print(f"  {label} {g}: done ({time.perf_counter() - t0:.2f} s)", flush=True)
+    diffs = [float(np.abs(np.asarray(a) - np.asarray(b)).sum()) for a, b in zip(vals[:-1], vals[1:])]
+    return vals, diffs, fitted_order(1.0 / np.array([g[0] for g in grids[:-1]]), diffs)
+
+
+def main():
+    errs, order = elastic()
+    print(f"elastic density: L1 {', '.join(f'{e:.2e}' for e in errs)}; fitted order {order:.2f}")
+    from vibro.studies.figures.specs import FIGURES
+
+    case = FIGURES[2].cases[1]
+    edges = np.linspace(0.0, case.h_max, 101)
+    _, diffs, order = successive(
+        lambda g: solve_phase_plane(case.build(), grid=g, h_max=case.h_max).bin_masses(edges), label="fig2 delta=1")
+    print(f"Fig. 2 delta = 1.0: successive L1 {', '.join(f'{d:.2e}' for d in diffs)}; fitted order {order:.2f}")
+    from models import ImpactOscillator, Newton
+
+    lin = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=None)
+    vals, diffs, order = successive(
+        lambda g: solve_phase_plane(lin, grid=g, h_max=2.5, walls=(None, 0.0), restitution=Newton(0.6)).mean_energy,
+        label="equilibrium wall r=0.6")
+    print(f"equilibrium wall r = 0.6: E[H] {', '.join(f'{v:.5f}' for v in vals)}; successive differences "
+          f"{', '.join(f'{d:.1e}' for d in diffs)}; fitted order {order:.2f}")
+
+
+if __name__ == "__main__":
+    main()
