@@ -27,3 +27,7 @@ class NormalisationError(VibroError):
 
 class StepSizeError(VibroError):
     """A time step is so large that a path could jump across the gap between the barriers."""
+
+
+class CudaUnavailableError(VibroError):
+    """``scheduler='cuda'`` was asked for, but numba-cuda is not installed or no CUDA device was found."""
