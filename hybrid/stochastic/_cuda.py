@@ -87,7 +87,9 @@ def require_cuda():
     try:
         from numba import cuda
     except ImportError:
-        raise CudaUnavailableError(f"scheduler='cuda' needs numba-cuda, which is not installed: {INSTALL_HINT}") from None
+        raise CudaUnavailableError(
+            f"scheduler='cuda' needs numba-cuda, which is not installed: {INSTALL_HINT}"
+        ) from None
     if simulator_enabled():
         return cuda
     if getattr(cuda, "implementation", "") != "NVIDIA":

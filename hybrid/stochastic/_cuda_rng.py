@@ -81,7 +81,7 @@ def _make_normal_pair(philox, single: bool):
 
 
 normal_pair_f64 = _make_normal_pair(philox4x32_10, single=False)
-normal_pair_f64.__doc__ = """The two standard normals (double) of steps ``2 * pair`` and ``2 * pair + 1`` of path ``path``.
+normal_pair_f64.__doc__ = """The two standard normals (double) of steps ``2 * pair`` and ``2 * pair + 1`` of a path.
 
 Uniforms have 53 bits; the first lies in (0, 1] so that the logarithm is finite (largest |z| about 8.6).
 
