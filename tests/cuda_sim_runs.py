@@ -31,6 +31,9 @@ RUNS = {
     "tpb64": dict(scheme="splitting", threads_per_block=64, launch_steps=37),  # odd: launches start on odd steps
     "f32": dict(scheme="splitting", threads_per_block=32, precision="f32"),
     "milstein": dict(scheme="milstein", threads_per_block=32),
+    # statistics every 3rd step: one launch vs launches of 7 steps (the sampling phase carries across launches)
+    "stride3": dict(scheme="splitting", threads_per_block=32, paths=32, stride=3),
+    "stride3_split": dict(scheme="splitting", threads_per_block=32, paths=32, stride=3, launch_steps=7),
 }
 
 

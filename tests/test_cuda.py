@@ -112,6 +112,13 @@ def test_cuda_numbers_do_not_depend_on_the_launch_configuration(sim):
 
 
 @needs_sim
+def test_cuda_stride_across_launches(sim):
+    a, b = sim["stride3"], sim["stride3_split"]
+    assert a.total("samples") == 32 * ((400 - 100) // 3)
+    _same(a, b)
+
+
+@needs_sim
 def test_cuda_resume_after_an_interruption_gives_the_uninterrupted_numbers(sim):
     assert sim["partial_steps"] == 50  # interrupted after launch 2 of 8, before its checkpoint
     _same(sim["tpb32"], sim["resumed"])
@@ -124,6 +131,7 @@ def test_cuda_barrier_invariant(sim):
     for name in cuda_sim_runs.RUNS:
         st = sim[name]
         assert st.violations == 0 and st.total("stuck") == 0 and st.impacts > 0, name
+        assert st.total("v_over") == 0 and st.v_counts.sum() == st.impacts, name
         assert st.xy_counts[:, :2].sum() == 0 and st.xy_counts[:, -2:].sum() == 0, name
         assert st.total("xy_out") == 0
     with np.load(sim["out"] / "tpb32_ckpt" / _cuda.CUDA_CHECKPOINT_FILE) as d:

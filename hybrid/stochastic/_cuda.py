@@ -47,7 +47,7 @@ from hybrid.io import atomic_write
 from . import _codegen, _cuda_rng
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
-TEMPLATE_VERSION = "1"
+TEMPLATE_VERSION = "2"
 CUDA_CHECKPOINT_FILE = "mc_cuda_checkpoint.npz"
 RNG = "philox4x32-10 box-muller"
 PRECISIONS = ("f64", "f32")
@@ -222,6 +222,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scal
 {load_counts}
         xi = 0.0
         xi2 = 0.0
+        _cs = (n0 - n_burn) % stride if n0 > n_burn else 0  # recorded steps since the last sample (no % per step)
         for _n in range(n0, n1):
             # one Philox call gives the normals of steps 2j and 2j+1; a launch may start on an odd step
             if _n == n0 or (_n & 1) == 0:
@@ -232,30 +233,35 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scal
                 xi = xi2
             rec = _n >= n_burn
 {step}
-            if rec and (_n - n_burn + 1) % stride == 0:
-                yy = y * y
-                xx = x * x
-                H = 0.5 * yy + {potential}
-                s_h += H
-                s_x2 += xx
-                s_y2 += yy
-                n_samples += 1
-                if H < g_bar:
-                    n_below += 1
-                hb = H * h_scale
-                if hb >= 0.0 and hb < HB:
-                    cuda.atomic.add(sh_h, int(hb), 1)
+            if not rec:
+                continue
+            _cs += 1
+            if _cs < stride:
+                continue
+            _cs = 0
+            yy = y * y
+            xx = x * x
+            H = 0.5 * yy + {potential}
+            s_h += H
+            s_x2 += xx
+            s_y2 += yy
+            n_samples += 1
+            if H < g_bar:
+                n_below += 1
+            hb = H * h_scale
+            if hb >= 0.0 and hb < HB:
+                cuda.atomic.add(sh_h, int(hb), 1)
+            else:
+                h_over += 1
+                if H != H:
+                    nonfinite += 1
+            if do_xy:
+                bx = (x - xlo) * x_scale
+                by = (y - ylo) * y_scale
+                if bx >= 0.0 and bx < nx and by >= 0.0 and by < ny:
+                    cuda.atomic.add(sh_xy, int(by) * nx + int(bx), 1)
                 else:
-                    h_over += 1
-                    if H != H:
-                        nonfinite += 1
-                if do_xy:
-                    bx = (x - xlo) * x_scale
-                    by = (y - ylo) * y_scale
-                    if bx >= 0.0 and bx < nx and by >= 0.0 and by < ny:
-                        cuda.atomic.add(sh_xy, int(by) * nx + int(bx), 1)
-                    else:
-                        xy_out += 1
+                    xy_out += 1
         xs[p] = x
         ys[p] = y
 {store}

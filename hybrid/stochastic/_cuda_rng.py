@@ -35,24 +35,48 @@ _TWO_PI_F = np.float32(6.283185307179586)
 _M2_F = np.float32(-2.0)
 
 
-def philox4x32_10(c0, c1, c2, c3, k0, k1):
-    """Philox-4x32-10 of the counter (c0, c1, c2, c3) under the key (k0, k1); words as uint64 below 2**32.
+def _philox_round(c0, c1, c2, c3, k0, k1):
+    # words < 2**32 in uint64: the product is exact (NVVM emits mul.lo.u64; libdevice's umulhi has no simulator)
+    p0 = _M0 * c0
+    p1 = _M1 * c2
+    return (p1 >> _S32) ^ c1 ^ k0, p1 & _MASK, (p0 >> _S32) ^ c3 ^ k1, p0 & _MASK
 
-    Examples
-    --------
-    >>> z = np.uint64(0)
-    >>> [hex(int(w)) for w in philox4x32_10(z, z, z, z, z, z)]  # Random123 known-answer vector
-    ['0x6627e8d5', '0xe169c58d', '0xbc57ac4c', '0x9b00dbd8']
-    """
-    for _ in range(10):
-        p0 = _M0 * c0
-        p1 = _M1 * c2
-        n0 = (p1 >> _S32) ^ c1 ^ k0
-        n2 = (p0 >> _S32) ^ c3 ^ k1
-        c0, c1, c2, c3 = n0, p1 & _MASK, n2, p0 & _MASK
-        k0 = (k0 + _W0) & _MASK
-        k1 = (k1 + _W1) & _MASK
-    return c0, c1, c2, c3
+
+def _make_philox(rnd):
+    def philox4x32_10(c0, c1, c2, c3, k0, k1):
+        # ten rounds written out (a loop was not unrolled by NVVM), the key bumped between rounds
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+        return rnd(c0, c1, c2, c3, k0, k1)
+
+    return philox4x32_10
+
+
+philox4x32_10 = _make_philox(_philox_round)
+philox4x32_10.__doc__ = """Philox-4x32-10 of the counter (c0, c1, c2, c3) under the key (k0, k1), words below 2**32.
+
+Examples
+--------
+>>> z = np.uint64(0)
+>>> [hex(int(w)) for w in philox4x32_10(z, z, z, z, z, z)]  # Random123 known-answer vector
+['0x6627e8d5', '0xe169c58d', '0xbc57ac4c', '0x9b00dbd8']
+"""
 
 
 def _make_normal_pair(philox, single: bool):
@@ -126,6 +150,7 @@ def device_normal_pair(precision: str):
     if precision not in _DEVICE:
         from numba import cuda
 
-        philox = cuda.jit(device=True, inline=True)(philox4x32_10)
+        rnd = cuda.jit(device=True, inline=True)(_philox_round)
+        philox = cuda.jit(device=True, inline=True)(_make_philox(rnd))
         _DEVICE[precision] = cuda.jit(device=True, inline=True)(_make_normal_pair(philox, precision == "f32"))
     return _DEVICE[precision]
