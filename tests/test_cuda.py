@@ -243,3 +243,19 @@ def test_cuda_without_a_device_is_a_one_line_error():
     assert len(out) == 1 and out[0].startswith("ERR ") and (
         "no CUDA device was found" in out[0] or 'pip install -e ".[cuda]"' in out[0]), out
     assert issubclass(CudaUnavailableError, ValueError)
+
+
+@needs_sim
+def test_cli_scheduler_cuda_without_a_device_is_one_line(tmp_path):
+    from numba import cuda
+
+    if cuda.is_available():
+        pytest.skip("a CUDA device is present")
+    e = _env()
+    e.pop("NUMBA_ENABLE_CUDASIM", None)
+    code = "import sys; from hybrid.cli import main; sys.exit(main(sys.argv[1:]))"
+    r = subprocess.run([sys.executable, "-c", code, "mc", "--scheduler", "cuda", "--precision", "f32", "--dt", "0.01",
+                        "--paths", "4", "--t-end", "1", "--t-burn", "0.5", "--out", str(tmp_path / "h.csv")],
+                       cwd=ROOT, env=e, capture_output=True, text=True, timeout=300)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("vibro mc: error: scheduler='cuda'"), r.stderr
