@@ -259,3 +259,42 @@ def test_cli_scheduler_cuda_without_a_device_is_one_line(tmp_path):
                        cwd=ROOT, env=e, capture_output=True, text=True, timeout=300)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("vibro mc: error: scheduler='cuda'"), r.stderr
+
+
+_PTX = """
+import re, sys
+import numba
+from numba import cuda
+try:
+    cuda.compile_ptx(lambda a: None, (numba.float64,), cc=(9, 0))
+except Exception as exc:
+    print("SKIP", type(exc).__name__, str(exc).splitlines()[0][:200] if str(exc) else "")
+    sys.exit(0)
+from models import DuffingImpact
+from hybrid.stochastic import SCHEMES, _cuda
+for prec in ("f64", "f32"):
+    ptx = _cuda.compile_ptx(DuffingImpact(), SCHEMES["splitting"], prec, 400, 200, 6400)
+    print(prec, " ".join(sorted(set(re.findall(r"^\\s+([a-z][\\w.]*)", ptx, re.M)))))
+"""
+
+
+def test_cuda_kernel_compiles_to_ptx_for_the_h100():
+    """The real numba-cuda pipeline (typing, lowering, NVVM) on the generated kernel, for sm_90, without a GPU.
+
+    The simulator runs the kernel as Python and checks no types; this does. It needs NVVM and NVRTC (the
+    ``nvidia-nvvm`` and ``nvidia-cuda-nvrtc`` wheels or a CUDA toolkit), which CI does not install: skipped there.
+    """
+    e = _env()
+    e.pop("NUMBA_ENABLE_CUDASIM", None)
+    r = subprocess.run([sys.executable, "-c", _PTX], cwd=ROOT, env=e, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = dict(line.split(" ", 1) for line in r.stdout.strip().splitlines())
+    if "SKIP" in out:
+        pytest.skip(f"no NVVM/NVRTC to compile PTX: {out['SKIP']}")
+    f64, f32 = set(out["f64"].split()), set(out["f32"].split())
+    assert {"atom.shared.add.u32", "atom.global.add.u64", "bar.sync"} <= f64 and "fma.rn.f64" in f64
+    # single precision: no double arithmetic in the step (float64 only in the moment sums and their conversions;
+    # mul.f64 is libdevice's huge-argument branch of sinf/cosf, never taken for Box-Muller's angle in [0, 2 pi))
+    assert {op for op in f32 if op.endswith(".f64") and not op.startswith(("cvt", "ld.", "st."))} <= {"add.f64",
+                                                                                                   "mul.f64"}
+    assert "fma.rn.f32" in f32

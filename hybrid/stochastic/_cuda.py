@@ -47,7 +47,7 @@ from hybrid.io import atomic_write
 from . import _codegen, _cuda_rng
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
-TEMPLATE_VERSION = "2"
+TEMPLATE_VERSION = "3"
 CUDA_CHECKPOINT_FILE = "mc_cuda_checkpoint.npz"
 RNG = "philox4x32-10 box-muller"
 PRECISIONS = ("f64", "f32")
@@ -220,6 +220,8 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scal
         else:
 {load}
 {load_counts}
+        fnx = _fty(nx)  # compared with float bins: no int -> double conversion in f32
+        fny = _fty(ny)
         xi = 0.0
         xi2 = 0.0
         _cs = (n0 - n_burn) % stride if n0 > n_burn else 0  # recorded steps since the last sample (no % per step)
@@ -258,7 +260,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scal
             if do_xy:
                 bx = (x - xlo) * x_scale
                 by = (y - ylo) * y_scale
-                if bx >= 0.0 and bx < nx and by >= 0.0 and by < ny:
+                if bx >= 0.0 and bx < fnx and by >= 0.0 and by < fny:
                     cuda.atomic.add(sh_xy, int(by) * nx + int(bx), 1)
                 else:
                     xy_out += 1
@@ -369,6 +371,37 @@ def build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision="f64") -> Cuda
     name = f"vibro_cuda_{scheme.name}_{model.fingerprint()}_{h}"
     module, _ = _codegen.load_source(name, src)
     return CudaKernel(module, src, tuple(model.params), law_values, lanes, precision)
+
+
+def kernel_signature(precision: str = "f64") -> tuple:
+    """numba types of the arguments of ``advance``, in the order :func:`run_ensemble` passes them."""
+    from numba import types as t
+
+    f = t.float32 if precision == "f32" else t.float64
+    i = t.int64
+
+    def a1(d):
+        return t.Array(d, 1, "C")
+
+    def a2(d):
+        return t.Array(d, 2, "C")
+
+    return (i, i, i, i, i, t.uint64, t.uint64, f, a1(f), a1(f), f, f, f, f, f, f, i, f, f, i, t.boolean, f,
+            a1(f), a1(f), a2(f), a2(i), a2(t.float64), a1(i), a1(i), a1(i))
+
+
+def compile_ptx(model, scheme, precision="f64", hbins=400, vbins=200, nxy=1, cc=(9, 0)) -> str:
+    """PTX of the kernel for compute capability ``cc`` (default sm_90, the H100), compiled without a GPU.
+
+    Needs numba-cuda and the NVVM and NVRTC libraries (for example the ``nvidia-nvvm`` and ``nvidia-cuda-nvrtc``
+    wheels), not a driver; ``NUMBA_ENABLE_CUDASIM`` must be unset. A check of the real compiler's typing and
+    lowering, which the simulator does not do.
+    """
+    from numba import cuda
+
+    kern = build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision)
+    ptx, _ = cuda.compile_ptx(kern.advance.py_func, kernel_signature(precision), cc=cc)
+    return ptx
 
 
 # ---------------------------------------------------------------------------------------------------- checkpoints
