@@ -16,7 +16,8 @@ numbers and the histograms differ:
 * **Launches and checkpoints.** The steps are cut into launches of ``launch_steps``; the state of every path
   (x, y, the scheme's lane variables, its counts and sums) and the histograms stay on the device between launches
   and are written to ``mc_cuda_checkpoint.npz`` every ``checkpoint_every`` launches. ``resume`` continues from the
-  saved step; as the numbers are counter-based, a resumed run gives exactly the numbers of an uninterrupted one.
+  saved step (the launches after the last checkpoint are run again); as the numbers are counter-based, a resumed
+  run gives exactly the numbers of an uninterrupted one.
 * **Precision.** Double by default. ``precision='f32'`` prints the model and every literal of the kernel as
   float32 (the state, the step and the normals in single precision); counts and the sums of moments stay int64 and
   float64.
@@ -190,7 +191,7 @@ VB = {vbins}
 NXY = {nxy}
 
 
-@cuda.jit
+@cuda.jit(cache=True)  # the PTX/cubin is cached next to this file, like the CPU kernels' machine code
 def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scale, g_bar, xlo, x_scale, nx, ylo,
             y_scale, ny, do_xy, v_scale, xs, ys, lanes, cnt, sm, hist, xyh, vh):
     """Steps [n0, n1) of paths 0 .. npath-1 (one thread each); state, counts and sums in/out per path."""
@@ -411,6 +412,12 @@ def _resume_keys():
     return (*_RESUME_KEYS, "precision", "rng")
 
 
+def _cpu_checkpoint_name() -> str:
+    from ._runner import CHECKPOINT_FILE
+
+    return CHECKPOINT_FILE
+
+
 def _write_state(directory: Path, settings: dict, n_done: int, host: dict, wall: float) -> None:
     directory.mkdir(parents=True, exist_ok=True)
     arrays = {"settings": np.array(json.dumps(settings, sort_keys=True)), "n_done": np.array(n_done),
@@ -518,6 +525,9 @@ def run_ensemble(model, scheme, settings: dict, *, checkpoint=None, resume=False
     saved = None
     if ckdir is not None and resume:
         saved = _read_state(ckdir, s)
+        if saved is None and (ckdir / _cpu_checkpoint_name()).exists():
+            raise ParameterError(f"{ckdir} holds a checkpoint of the CPU scheduler, whose random streams differ; "
+                                 "resume it without --scheduler cuda, or use another --checkpoint directory")
     elif ckdir is not None and (ckdir / CUDA_CHECKPOINT_FILE).exists():
         raise ParameterError(f"{ckdir / CUDA_CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
     if saved is None:
@@ -533,11 +543,11 @@ def run_ensemble(model, scheme, settings: dict, *, checkpoint=None, resume=False
     dev = {k: cuda.to_device(host[k]) for k in order}
     blocks = -(-paths // tpb)
 
-    def launch(n0, n1):
-        kern.advance[blocks, tpb](np.int64(n0), np.int64(n1), np.int64(paths), *scal, prm, rprm, *geo,
+    def launch(n0, n1, npath=paths):
+        kern.advance[blocks, tpb](np.int64(n0), np.int64(n1), np.int64(npath), *scal, prm, rprm, *geo,
                                   *(dev[k] for k in order))
 
-    launch(0, 0)  # compiles (numba-cuda compiles lazily at the first launch); no step is taken
+    launch(0, 0, 0)  # compiles (numba-cuda compiles at the first launch); no path is touched
     cuda.synchronize()
     compile_time = time.perf_counter() - t0
 
