@@ -191,7 +191,7 @@ VB = {vbins}
 NXY = {nxy}
 
 
-@cuda.jit(cache=True)  # the PTX/cubin is cached next to this file, like the CPU kernels' machine code
+@cuda.jit({jit_options})  # cache: the compiled kernel is kept next to this file, like the CPU kernels
 def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scale, g_bar, xlo, x_scale, nx, ylo,
             y_scale, ny, do_xy, v_scale, xs, ys, lanes, cnt, sm, hist, xyh, vh):
     """Steps [n0, n1) of paths 0 .. npath-1 (one thread each); state, counts and sums in/out per path."""
@@ -283,8 +283,12 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, prm, rprm, wl, wr, h_scal
 '''
 
 
-def generate_cuda_source(model, scheme, hbins: int, vbins: int, nxy: int, precision: str = "f64"):
+def generate_cuda_source(model, scheme, hbins: int, vbins: int, nxy: int, precision: str = "f64",
+                         max_registers: int | None = None):
     """The CUDA kernel module for ``model`` and ``scheme`` (histogram sizes are compile-time constants).
+
+    ``max_registers`` caps the registers per thread (numba-cuda's ``max_registers``; not passed on the simulator,
+    which does not take it): a tuning knob for occupancy, see :func:`max_registers_from_env`.
 
     Returns ``(source, law_values, lane_vars)``.
 
@@ -322,6 +326,7 @@ def generate_cuda_source(model, scheme, hbins: int, vbins: int, nxy: int, precis
     sums = [(SUM_VARS[s], j) for j, s in enumerate(SUMS)]
     src = _MODULE.format(
         version=TEMPLATE_VERSION, scheme=scheme.name, model=f"{model.name} {model.fingerprint()}",
+        jit_options="cache=True" + (f", max_registers={int(max_registers)}" if max_registers else ""),
         precision=precision, ftype="float32" if precision == "f32" else "float64", hbins=int(hbins),
         vbins=int(vbins), nxy=int(nxy), unpack=ind("\n".join(unpack) or "pass", " " * 8),
         preamble=ind("\n".join(dict.fromkeys(em.preamble)) or "pass", " " * 8),
@@ -359,6 +364,33 @@ class CudaKernel:
 _RNG_HASH = hashlib.sha256(inspect.getsource(_cuda_rng).encode()).hexdigest()[:8]
 
 
+def max_registers_from_env() -> int | None:
+    """``VIBRO_CUDA_MAX_REGISTERS`` as an int (unset, empty or 0: no cap; the compiler chooses).
+
+    The f64 kernel uses about 140 registers per thread on sm_90 (ptxas, no spills): 3 blocks of 128 threads per
+    SM. A cap trades occupancy for spills; only a measurement on the device can tell which wins
+    (``benchmarks/gpu_throughput.py --max-registers 0,96,64``).
+
+    Examples
+    --------
+    >>> import os; os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None) and None
+    >>> max_registers_from_env() is None
+    True
+    """
+    import os
+
+    raw = os.environ.get("VIBRO_CUDA_MAX_REGISTERS", "").strip()
+    if not raw or raw == "0":
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = -1
+    if not 16 <= n <= 255:
+        raise ParameterError(f"VIBRO_CUDA_MAX_REGISTERS={raw!r} must be an integer in [16, 255] (or 0: no cap)")
+    return n
+
+
 def build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision="f64") -> CudaKernel:
     """Generate and import the CUDA kernel module (written to the kernel cache directory, like the CPU kernels).
 
@@ -366,8 +398,10 @@ def build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision="f64") -> Cuda
     """
     import numba as nb
 
-    src, law_values, lanes = generate_cuda_source(model, scheme, hbins, vbins, nxy, precision)
-    sim = "sim" if simulator_enabled() else "dev"
+    sim = simulator_enabled()
+    maxreg = None if sim else max_registers_from_env()
+    src, law_values, lanes = generate_cuda_source(model, scheme, hbins, vbins, nxy, precision, maxreg)
+    sim = "sim" if sim else "dev"
     h = hashlib.sha256((src + _RNG_HASH + nb.__version__ + np.__version__ + sim).encode()).hexdigest()[:16]
     name = f"vibro_cuda_{scheme.name}_{model.fingerprint()}_{h}"
     module, _ = _codegen.load_source(name, src)
