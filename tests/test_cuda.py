@@ -186,7 +186,9 @@ def test_cuda_source_comes_from_the_cpu_step_code(scheme, precision):
 
 
 def test_cuda_translation_refuses_unknown_per_chunk_statements():
-    assert _cuda._to_shared_atomics("    vh[k, int(_vb)] += 1") == "    cuda.atomic.add(sh_v, int(_vb), 1)"
+    assert _cuda._to_shared_atomics("    vh[k, int(_vb)] += 1").splitlines() == [
+        "    _bi = int(_vb)", "    if _bi >= 0 and _bi < VB:", "        cuda.atomic.add(sh_v, _bi, 1)", "    else:",
+        "        v_over += 1"]
     with pytest.raises(ModelError, match="shared histogram"):
         _cuda._to_shared_atomics("    other[k, 3] += 1")
     with pytest.raises(ModelError, match="per-chunk"):

@@ -48,7 +48,7 @@ from hybrid.io import atomic_write
 from . import _codegen, _cuda_rng
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
-TEMPLATE_VERSION = "3"
+TEMPLATE_VERSION = "4"
 CUDA_CHECKPOINT_FILE = "mc_cuda_checkpoint.npz"
 RNG = "philox4x32-10 box-muller"
 PRECISIONS = ("f64", "f32")
@@ -60,8 +60,8 @@ COUNT_VARS = {"samples": "n_samples", "below": "n_below", "impacts_left": "n_il"
               "h_over": "h_over", "xy_out": "xy_out", "v_over": "v_over", "violations": "viol", "stuck": "stuck",
               "nonfinite": "nonfinite"}
 SUM_VARS = {"H": "s_h", "x2": "s_x2", "y2": "s_y2", "impact_speed": "s_iv"}
-# per-chunk histograms of the CPU step code -> the block-shared histograms of the CUDA kernel
-SHARED_HISTS = {"vh": "sh_v", "hist": "sh_h"}
+# per-chunk histograms of the CPU step code -> (block-shared histogram, its size, the overflow counter)
+SHARED_HISTS = {"vh": ("sh_v", "VB", "v_over"), "hist": ("sh_h", "HB", "h_over")}
 
 
 # ---------------------------------------------------------------------------------------------------- availability
@@ -164,7 +164,10 @@ def _to_shared_atomics(code: str) -> str:
         ind, name, idx, inc = m.groups()
         if name not in SHARED_HISTS:
             raise ModelError(f"the CUDA kernel has no shared histogram for {name!r} of the CPU step code")
-        return f"{ind}cuda.atomic.add({SHARED_HISTS[name]}, {idx}, {inc})"
+        sh, size, over = SHARED_HISTS[name]
+        # the device does not check bounds: an index outside the shared array is counted as overflow instead
+        return (f"{ind}_bi = {idx}\n{ind}if _bi >= 0 and _bi < {size}:\n{ind}    cuda.atomic.add({sh}, _bi, {inc})\n"
+                f"{ind}else:\n{ind}    {over} += {inc}")
 
     out = "\n".join(pattern.sub(repl, line) for line in code.splitlines())
     if re.search(r"\[k\b", out):
