@@ -267,6 +267,9 @@ _PTX = """
 import re, sys
 import numba
 from numba import cuda
+if getattr(cuda, "implementation", "") != "NVIDIA":
+    print("SKIP numba's built-in CUDA target compiles device functions only with a device; needs numba-cuda")
+    sys.exit(0)
 try:
     cuda.compile_ptx(lambda a: None, (numba.float64,), cc=(9, 0))
 except Exception as exc:
@@ -292,7 +295,7 @@ def test_cuda_kernel_compiles_to_ptx_for_the_h100():
     assert r.returncode == 0, r.stderr[-3000:]
     out = dict(line.split(" ", 1) for line in r.stdout.strip().splitlines())
     if "SKIP" in out:
-        pytest.skip(f"no NVVM/NVRTC to compile PTX: {out['SKIP']}")
+        pytest.skip(f"cannot compile PTX here: {out['SKIP']}")
     f64, f32 = set(out["f64"].split()), set(out["f32"].split())
     assert {"atom.shared.add.u32", "atom.global.add.u64", "bar.sync"} <= f64 and "fma.rn.f64" in f64
     # single precision: no double arithmetic in the step (float64 only in the moment sums, add.f64 or sub.f64 when

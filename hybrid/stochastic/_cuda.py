@@ -437,6 +437,8 @@ def compile_ptx(model, scheme, precision="f64", hbins=400, vbins=200, nxy=1, cc=
     """
     from numba import cuda
 
+    if getattr(cuda, "implementation", "") != "NVIDIA" or simulator_enabled():
+        raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
     kern = build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision)
     ptx, _ = cuda.compile_ptx(kern.advance.py_func, kernel_signature(precision), cc=cc)
     return ptx
