@@ -43,3 +43,7 @@ class CheckpointError(ParameterError):
 
 class HistogramRangeWarning(VibroWarning):
     """More than a small share of the samples fell outside a histogram's range (they are counted, not binned)."""
+
+
+class CudaUnavailableError(VibroError):
+    """``scheduler='cuda'`` was asked for, but numba-cuda is not installed or no CUDA device was found."""

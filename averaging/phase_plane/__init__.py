@@ -23,8 +23,9 @@ tangent to one family of cell faces:
   between energies. Along the orbit the convection is upwind-biased third order (kappa = 1/3, linear, so no
   nonlinear iteration; first order next to arc ends), which keeps the jump of p at the wall sharp. Rings are
   stretched, H = h_max (theta t + (1 - theta) t**2), theta = 0.4, finer where the density lives. Energy exchange
-  between rings (the damping drift and the noise) is a drift-diffusion in H, discretised by Scharfetter-Gummel exponential fitting: positive, second order, and
-  exact for the Gibbs density exp(-cH/D) of linear damping with additive noise (the drift/diffusion ratio
+  between rings (the damping drift and the noise) is a drift-diffusion in H, discretised by Scharfetter-Gummel
+  exponential fitting: positive, second order, and exact for the Gibbs density exp(-cH/D) of linear damping with
+  additive noise (the drift/diffusion ratio
   -c/D is constant in H). The mixed derivatives of the rank-one noise tensor are central differences.
 * A wall x = w is the vertical line u = U, |U| = sqrt(2 G(w)), in the (u, y) plane; it cuts the rings above
   G(w) at psi = +-arccos(|U|/r). Ring faces are put at the wall energies, and the arcs end at the cut. The

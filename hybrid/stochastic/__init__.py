@@ -22,6 +22,8 @@ How it works:
 * ``_runner``: chunks of paths run on ``numba.get_num_threads()`` threads (a ``nogil`` kernel; each call interleaves
   8 paths so that their dependency chains overlap) or on Dask; checkpoints and resume. A ``prange`` kernel gave the
   same numbers but doubled the compile time (about 18 s instead of 7 s cold), hence the thread pool.
+* ``_cuda`` / ``_cuda_rng``: ``scheduler="cuda"``, the same generated step code in a numba-cuda kernel (one thread
+  per path, Philox-4x32-10 normals, block-shared histograms, launches with checkpoints); docs/gpu.md.
 
 Examples
 --------

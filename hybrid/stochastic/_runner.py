@@ -518,8 +518,8 @@ def _run_error(model, exc: Exception) -> VibroError:
 def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0, t_burn=200.0, seed=1, h_max=4.0,
                       bins=400, xy_bins=(80, 80), xy_range=None, stride=1, progress=False, checkpoint=None,
                       resume=False, scheduler=None, *, chunk_paths=None, checkpoint_every=4, v_bins=200, v_max=None,
-                      x0=(0.0, 0.0), check_dt=True, max_path_steps=MAX_PATH_STEPS,
-                      max_memory=MAX_MEMORY) -> EnsembleStatistics:
+                      x0=(0.0, 0.0), check_dt=True, max_path_steps=MAX_PATH_STEPS, max_memory=MAX_MEMORY,
+                      precision="f64", threads_per_block=128, launch_steps=None) -> EnsembleStatistics:
     """Simulate an ensemble of paths of ``model`` and return streaming statistics (no paths are stored).
 
     Parameters
@@ -546,8 +546,13 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         Directory of a checkpoint written every ``checkpoint_every`` chunks and at the end (atomic).
     resume : bool
         Continue from the checkpoint: finished chunks are not recomputed, none is counted twice.
-    scheduler : None, "threads", "dask", "dask=ADDRESS" or a ``distributed.Client``
-        Where chunks run: numba threads in this process (default), or Dask (a LocalCluster for "dask").
+    scheduler : None, "threads", "dask", "dask=ADDRESS", "cuda" or a ``distributed.Client``
+        Where chunks run: numba threads in this process (default), Dask (a LocalCluster for "dask"), or an NVIDIA
+        GPU with numba-cuda (one thread per path, see :mod:`hybrid.stochastic._cuda`; ``pip install -e ".[cuda]"``).
+    precision : {"f64", "f32"}
+        Floating point of the ``cuda`` kernel (the CPU kernels are double only).
+    threads_per_block, launch_steps : int
+        ``cuda`` only: block size and steps per kernel launch; neither changes any number.
     check_dt : bool
         Apply :func:`check_step` (refuse or warn on coarse steps).
     max_path_steps, max_memory : float
@@ -583,12 +588,22 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     if check_dt:
         settings["step_rule"] = check_step(model, dt, h_max, sch)
     local = scheduler in (None, "threads", "local")
-    if not (local or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")
+    gpu = isinstance(scheduler, str) and scheduler == "cuda"
+    if not (local or gpu or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")
             or hasattr(scheduler, "submit")):  # before compiling: a typo must not cost a kernel build
-        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
+        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS, cuda or a Client")
+    if precision != "f64" and not gpu:
+        raise ParameterError(f"precision={precision!r} needs scheduler='cuda' (the CPU kernels are double only)")
     if resume and checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
     checkpoint_every = _positive_int("checkpoint_every", checkpoint_every)
+    if gpu:  # launches, checkpoints and resume of its own (_cuda.py); the result checks below are shared
+        from . import _cuda
+
+        stats = _cuda.run_ensemble(model, sch, settings, checkpoint=checkpoint, resume=resume,
+                                   checkpoint_every=checkpoint_every, progress=progress, precision=precision,
+                                   threads_per_block=threads_per_block, launch_steps=launch_steps)
+        return _check_result(model, stats, settings, dt)
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if ckdir is not None:
         _check_checkpoint_dir(ckdir)
@@ -665,6 +680,13 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     stats.wall_time = wall0 + time.perf_counter() - t_start
     if ckdir is not None:
         _write_checkpoint(ckdir, stats)
+    return _check_result(model, stats, settings, dt)
+
+
+def _check_result(model, stats: EnsembleStatistics, settings: dict, dt: float) -> EnsembleStatistics:
+    """Refuse diverged paths and bad restitution values; report samples outside the histograms; flag chattering
+    (any scheduler)."""
+    _bad_restitution(model, stats.chunk_counts, stats.chunk_sums, stats.chunk_ids)
     bad = stats.total("nonfinite")
     if bad:
         raise ModelError(f"{bad} samples had a non-finite energy: the paths diverged; reduce dt or check the model")
@@ -678,7 +700,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
             f"chattering: {per_step:.3g} impacts per path-step (limit {CHATTER_IMPACTS_PER_STEP}); paths bounce "
             f"against a wall on the step scale, so impact rates and wall statistics are not resolved by dt={dt:g}; "
             "reduce dt until the impact rate stops changing, or treat the sticking phase in the model",
-            ChatteringWarning, stacklevel=2,
+            ChatteringWarning, stacklevel=3,
         )
     return stats
 

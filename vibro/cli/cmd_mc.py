@@ -2,7 +2,7 @@
 
     vibro mc --model duffing --param delta=1.0 --restitution ma:vc=0.4 --scheme milstein --dt 1e-3 --paths 256 \\
              --t-end 2200 --t-burn 200 --seed 1 --h-max 4 --bins 400 --out h.csv [--joint joint.csv] \\
-             [--checkpoint DIR] [--resume] [--scheduler dask[=ADDRESS]]
+             [--checkpoint DIR] [--resume] [--scheduler dask[=ADDRESS]|cuda] [--precision f64|f32]
 """
 
 from __future__ import annotations
@@ -47,10 +47,14 @@ def register(subparsers) -> None:
     p.add_argument("--xy-bins", type=int, nargs=2, default=(80, 80), metavar=("NX", "NY"), help="(x, y) bins")
     p.add_argument("--chunk-paths", type=int, default=None, help="paths per chunk (default: 8, fewer for few paths)")
     p.add_argument("--checkpoint", default=None, metavar="DIR", help="write a checkpoint in DIR")
-    p.add_argument("--checkpoint-every", type=int, default=4, metavar="N", help="checkpoint every N chunks")
+    p.add_argument("--checkpoint-every", type=int, default=4, metavar="N",
+                   help="checkpoint every N chunks (cuda: N launches)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint in DIR")
-    p.add_argument("--scheduler", default=None, metavar="threads|dask[=ADDRESS]",
-                   help="where chunks run (default: threads, one per core; dask needs the dask extra)")
+    p.add_argument("--scheduler", default=None, metavar="threads|dask[=ADDRESS]|cuda",
+                   help="where chunks run (cuda: an NVIDIA GPU, one thread per path; pip install -e '.[cuda]')")
+    p.add_argument("--precision", default="f64", choices=["f64", "f32"], help="floating point of --scheduler cuda")
+    p.add_argument("--threads-per-block", type=int, default=128, metavar="N",
+                   help="--scheduler cuda: block size (changes no number)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar (default: when stderr is a terminal)")
     p.add_argument("--summary-json", default=None, help="also write the summary as JSON (not written if absent)")
@@ -83,6 +87,7 @@ def run(args) -> int:
             stride=args.stride, progress=progress, checkpoint=args.checkpoint, resume=args.resume,
             scheduler=args.scheduler, chunk_paths=args.chunk_paths, checkpoint_every=args.checkpoint_every,
             max_path_steps=args.max_path_steps, max_memory=args.max_memory_gb * 1e9,
+            precision=args.precision, threads_per_block=args.threads_per_block,
         )
     for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
         print(f"vibro mc: warning: {text}", file=sys.stderr)
