@@ -42,6 +42,8 @@ CHECKPOINT_FILE = "mc_checkpoint.npz"
 CHECKPOINT_FORMAT = 2
 """Version of the checkpoint layout (2: per-chunk underflow and restitution counts, run identity, checksum)."""
 
+MIN_CHUNKS_FOR_CI = 8
+"""Fewer chunks than this make the batch-means intervals unreliable (a warning says so)."""
 MAX_PATH_STEPS = 1e13
 """Default refusal threshold of :func:`simulate_ensemble` for paths x steps (about a day on a large node)."""
 
@@ -691,6 +693,14 @@ def _check_result(model, stats: EnsembleStatistics, settings: dict, dt: float) -
     if bad:
         raise ModelError(f"{bad} samples had a non-finite energy: the paths diverged; reduce dt or check the model")
     _outside_warnings(stats)
+    chunks = len(stats.chunk_ids)
+    if chunks < MIN_CHUNKS_FOR_CI:
+        # batch means with few batches: the t quantile is huge and the variance estimate itself noisy
+        warnings.warn(
+            f"only {chunks} chunks: the batch-means confidence intervals are unreliable below {MIN_CHUNKS_FOR_CI} "
+            f"(use more paths or a smaller chunk_paths, e.g. chunk_paths={max(1, stats.paths // 16)})",
+            VibroWarning, stacklevel=3,
+        )
     sampled_steps = stats.paths * settings["n_samp"] * settings["stride"]
     per_step = stats.impacts / sampled_steps if sampled_steps else 0.0
     # inelastic collapse needs e < 1; elastic walls at a coarse dt are resolved exactly by the in-step location

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 import warnings
 
 from hybrid.errors import ParameterError
@@ -68,6 +69,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from hybrid.stochastic import atomic_write_text, simulate_ensemble
+    from vibro.provenance import record, write_sidecar
 
     for name in ("out", "joint", "summary_json"):
         target = getattr(args, name)
@@ -78,6 +80,7 @@ def run(args) -> int:
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
     model = model_from_args(args)
+    started = time.perf_counter()
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")
@@ -94,8 +97,13 @@ def run(args) -> int:
     stats.to_csv(args.out)
     if args.joint:
         atomic_write_text(args.joint, stats.joint_to_pandas().to_csv(index=False, float_format="%.17g"))
+    settings = {**stats.settings, "scheduler": args.scheduler or "threads",
+                "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads, "
+                                   "workers or launches"}
+    rec = record("mc", model=model, settings=settings, results=stats.summary(), started=started)
+    write_sidecar(args.out, rec)
     if args.summary_json:
-        atomic_write_text(args.summary_json, json.dumps(stats.summary(), indent=1))
+        atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
     g = stats.settings["g_barrier"]
     print(f"vibro mc: {stats.settings['scheme']} dt={stats.settings['dt']:g} paths={stats.paths} "
           f"seed={stats.seed} path-steps={stats.path_steps:.4g}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from hybrid.errors import ModelError, ParameterError
 
@@ -149,8 +150,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"status {res.status}: {res.message}; {res.n_impacts} impacts, {res.n_steps} steps, "
           f"{res.wall_time:.3f} s (compile {res.compile_time:.3f} s)")
     if args.out:
+        from vibro.provenance import record, write_sidecar
+
         write_csv_atomically(df, args.out)
-        print(f"wrote {args.out} ({len(df)} impacts)")
+        settings = {"backend": res.backend, "rtol": args.rtol, "x0": args.x0, "v0": args.v0, "t_end": args.t_end,
+                    "max_impacts": args.max_impacts, "max_steps": args.max_steps}
+        results = {"status": res.status, "message": res.message, "impacts": res.n_impacts, "steps": res.n_steps,
+                   "wall_time_s": res.wall_time}
+        write_sidecar(args.out, record("orbit", model=model, settings=settings, results=results))
+        print(f"wrote {args.out} ({len(df)} impacts) and its provenance {Path(args.out).with_suffix('.json')}")
     try:
         Gd = model.barrier_energy
     except ModelError as exc:  # asymmetric barriers: no single impact level for eqs. 11-14

@@ -75,7 +75,13 @@ def run(args) -> int:
     print(f"predicted L1 of the candidates: {preds}")
     if args.out:
         from hybrid.io import write_csv_atomically
+        from vibro.provenance import record, write_sidecar
 
         path = write_csv_atomically(sol.to_pandas(), args.out)
-        print(f"wrote {path}")
+        results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,
+                   "estimated_error": sol.estimated_error, "predictions": sol.choice.predictions}
+        settings = {"tol": args.tol, "max_cost": args.max_cost, "seed": args.seed, "forced_method": args.method,
+                    **sol.choice.settings}
+        side = write_sidecar(path, record("solve", model=model, settings=settings, results=results, started=t0))
+        print(f"wrote {path} and {side}")
     return 0
