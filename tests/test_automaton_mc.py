@@ -161,3 +161,17 @@ def test_bad_requests_are_refused_in_one_line():
     with pytest.raises(ModelError, match="equally many"):
         simulate_automaton(HybridAutomaton((x, y), {}, [Mode("m", (0, 0), ((1, 0), (1,)))]), "em",
                            **{**base, "histograms": {}, "x0": (0, 0)})
+
+
+@pytest.mark.parametrize("script", ["06_equilibrium_stop.py", "07_impact_pair.py"])
+def test_examples_06_07_run_headless_and_pass_their_checks(script):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    res = subprocess.run([sys.executable, str(root / "examples" / script), "--quick"], capture_output=True, text=True,
+                         timeout=600, cwd=root, env=dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(root)))
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert res.stdout.strip().splitlines()[-1] == "OK"
