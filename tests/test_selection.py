@@ -200,3 +200,19 @@ def test_elastic_stationary_problem_is_used_consistently():
     model, exact = elastic_duffing()
     assert ElasticOracle.for_model(model).beta == pytest.approx(exact.beta)
     assert isinstance(exact, ElasticStationary)
+
+
+def test_chooser_takes_the_phase_plane_solver_below_the_averaging_error():
+    from vibro.solve import error_model
+
+    ch = choose(DuffingImpact(), tol=0.01, mc_pilot=False)     # Fig. 2, delta = 1: jump predicted 0.04
+    assert ch.method == "fpk" and ch.expected_error == error_model()["fpk"]["floor"]
+    assert choose(DuffingImpact(), tol=0.003, mc_pilot=False).method == "monte-carlo"  # below its measured floor
+
+
+def test_forced_fpk_on_elastic_walls_is_the_exact_density():
+    model = elastic_duffing(c=0.1, D=0.1)[0]
+    o = ElasticOracle.for_model(model)
+    sol = solve(model, tol=0.02, method="fpk")
+    assert sol.method == "fpk"
+    assert l1_between_histograms(sol.masses, o.bin_masses(sol.edges)) < 5e-3

@@ -29,7 +29,7 @@ def register(subparsers) -> None:
     )
     add_model_arguments(p)
     p.add_argument("--tol", type=float, default=0.02, help="target L1 distance of p(H) (default 0.02)")
-    p.add_argument("--method", default="auto", choices=["auto", "exact", "paper", "jump", "monte-carlo"],
+    p.add_argument("--method", default="auto", choices=["auto", "exact", "paper", "jump", "fpk", "monte-carlo"],
                    help="force a method (default: auto)")
     p.add_argument("--max-cost", type=float, default=600.0, dest="max_cost",
                    help="wall-time budget of Monte Carlo in seconds (default 600)")

@@ -8,7 +8,8 @@
 2. **paper** averaging (the drift form of the impact loss) when the energy lost per cycle is small.
 3. **jump** averaging (impacts as jumps of the averaged energy) when impacts dominate the dissipation but each
    cycle still loses a small share of the energy between impacts.
-4. **Monte Carlo** otherwise, planned by :mod:`vibro.solve.planner`.
+4. **fpk**, the phase-plane solver of the full problem, when its measured floor meets the tolerance;
+5. **Monte Carlo** otherwise, planned by :mod:`vibro.solve.planner`.
 
 The predicted error of each averaging method is the error model of :mod:`vibro.solve.errormodel`. Averaging is
 refused when the 90th-percentile energy level loses more than ``MAX_DAMPING_RATIO`` of its energy per cycle to the
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 from hybrid.errors import ModelError, ParameterError
 
 from .diagnostics import Diagnostics, diagnose
-from .errormodel import MAX_DAMPING_RATIO, MAX_IMPACT_RATIO, predict_averaging_error
+from .errormodel import MAX_DAMPING_RATIO, MAX_IMPACT_RATIO, error_model, predict_averaging_error
 from .planner import plan_monte_carlo
 
 
@@ -140,6 +141,11 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
             f"no averaging method is predicted within tol={tol:g} (paper {preds['paper']:.3f}, "
             f"jump {preds['jump']:.3f})"
         )
+    # the phase-plane solver of the full (x, y) problem: accurate to its measured floor, about a second
+    preds["fpk"] = predict_averaging_error("fpk", diag)
+    if preds["fpk"] <= tol:
+        why = "; ".join(reasons) + "; the phase-plane FPK solver (impacts as boundary conditions) reaches it"
+        return Choice("fpk", why, preds["fpk"], error_model()["fpk"]["cost_s"], {}, preds, diag)
     return mc_choice(model, tol, diag, "; ".join(reasons), preds, max_cost, mc_pilot, seed)
 
 

@@ -71,6 +71,8 @@ def predict_averaging_error(method: str, diag: Diagnostics) -> float:
         if not (diag.linear_damping and diag.additive_noise):
             return math.inf
         return m["floor"] + m["tail"] * diag.tail_impact_speed
+    if method == "fpk":
+        return error_model()["fpk"]["floor"]
     m = error_model()[method]
     damp = 0.0 if (diag.linear_damping and diag.additive_noise) else diag.r_damp
     return m["floor"] + m["slope"] * diag.r_imp + m["slope_damp"] * damp

@@ -94,8 +94,8 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
     check_request(tol, max_cost)  # also for method='monte-carlo', which does not go through choose
     t0 = time.perf_counter()
     forced = method != "auto"
-    if method not in ("auto", "exact", "paper", "jump", "monte-carlo"):
-        raise ParameterError(f"method={method!r}; use auto, exact, paper, jump or monte-carlo")
+    if method not in ("auto", "exact", "paper", "jump", "fpk", "monte-carlo"):
+        raise ParameterError(f"method={method!r}; use auto, exact, paper, jump, fpk or monte-carlo")
     if method == "monte-carlo":
         try:
             diag = diagnose(model, h_max)
@@ -157,6 +157,10 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
 
     if choice.method == "exact":
         sd = stationary_density(model.with_restitution(Elastic()), method="paper", h_max=h_max, points=2000)
+    elif choice.method == "fpk":
+        from averaging.phase_plane import stationary_density_xy
+
+        sd = stationary_density_xy(model, h_max=h_max, points=2000)
     else:
         sd = stationary_density(model, method=choice.method, h_max=h_max, points=2000)
     H = np.asarray(sd.H, dtype=float)
