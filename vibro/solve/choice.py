@@ -141,8 +141,9 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
             f"no averaging method is predicted within tol={tol:g} (paper {preds['paper']:.3f}, "
             f"jump {preds['jump']:.3f})"
         )
-    # the phase-plane solver of the full (x, y) problem: accurate to its measured floor, about a second
-    preds["fpk"] = predict_averaging_error("fpk", diag)
+    # the phase-plane solver of the full (x, y) problem: accurate to its measured floor, about a second; offered
+    # only where that floor was measured (the paper's quasi-conservative cases), not where averaging is refused
+    preds["fpk"] = math.inf if refusal else predict_averaging_error("fpk", diag)
     if preds["fpk"] <= tol:
         why = "; ".join(reasons) + "; the phase-plane FPK solver (impacts as boundary conditions) reaches it"
         return Choice("fpk", why, preds["fpk"], error_model()["fpk"]["cost_s"], {}, preds, diag)
