@@ -111,7 +111,7 @@ def test_h_max_below_every_sample_warns_and_reports_the_overflow(tmp_path, capsy
     n = 8 * 9000
     assert df["count"].iloc[-1] == n and df["count"].iloc[:-1].sum() == 0  # the overflow row holds every sample
     assert df["H_lo"].iloc[-1] == 1e-6 and np.isinf(df["H_hi"].iloc[-1]) and np.isinf(df["H_lo"].iloc[0])
-    h = json.loads(js.read_text())["outside_histograms"]["H"]
+    h = json.loads(js.read_text())["results"]["outside_histograms"]["H"]
     assert h == {"below": 0, "above": n, "outside": n, "total": n, "fraction": 1.0}
     assert "1 uncounted" in captured.out
 

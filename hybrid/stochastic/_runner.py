@@ -98,6 +98,15 @@ def _linear_damping(model) -> float:
         return float("nan")
 
 
+def _visited_span(model, h_max: float) -> tuple[float, float]:
+    """The positions a path visits up to energy h_max: the gap, cut where a side is open by the turning point."""
+    left, right = model.barriers
+    if np.isfinite(left) and np.isfinite(right):
+        return left, right
+    amp = float(np.max(np.abs(model.turning_points(h_max))))
+    return (left if np.isfinite(left) else -amp), (right if np.isfinite(right) else amp)
+
+
 def check_step(model, dt: float, h_max: float = 4.0, scheme=None) -> dict:
     """Apply the step-size rule; raise :class:`StepSizeError` or warn :class:`StepSizeWarning`.
 
@@ -118,15 +127,11 @@ def check_step(model, dt: float, h_max: float = 4.0, scheme=None) -> dict:
     True
     """
     v = 4.0 * speed_scale(model, h_max)
-    left, right = model.barriers
-    if np.isfinite(left) and np.isfinite(right):
-        lo, hi = left, right
-    else:
-        amp = float(np.max(np.abs(model.turning_points(h_max))))
-        lo, hi = (left if np.isfinite(left) else -amp), (right if np.isfinite(right) else amp)
+    lo, hi = _visited_span(model, h_max)
     xs = np.linspace(lo, hi, 401)
     gx = model.restoring(xs)
     omega = math.sqrt(max(float(np.max(np.diff(gx) / np.diff(xs))), 0.0))
+    left, right = model.barriers
     gap = right - left
     info = {"speed": v, "gap": gap, "omega": omega, "v_dt_over_gap": v * dt / gap if np.isfinite(gap) else 0.0,
             "omega_dt": omega * dt, "ok": True}
@@ -209,12 +214,7 @@ def _check_noise(model, h_max: float = 4.0) -> None:
             f"the noise gives sigma^2 = {s2}, which is complex; noise intensities must be real and >= 0"
         )
     # on the states a path visits: the gap (or the turning points at h_max) times |y| <= 2 sqrt(2 h_max)
-    left, right = model.barriers
-    if np.isfinite(left) and np.isfinite(right):
-        lo, hi = left, right
-    else:
-        amp = float(np.max(np.abs(model.turning_points(h_max))))
-        lo, hi = (left if np.isfinite(left) else -amp), (right if np.isfinite(right) else amp)
+    lo, hi = _visited_span(model, h_max)
     vmax = 2.0 * math.sqrt(2.0 * h_max)
     xs = np.linspace(lo, hi, 41)
     ys = np.linspace(-vmax, vmax, 41)
