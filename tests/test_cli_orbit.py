@@ -37,7 +37,8 @@ def test_orbit_writes_impact_log_and_compares(tmp_path, capsys, backend):
     text = capsys.readouterr().out
     for needle in ("eq. 11", "eq.13 paper", "exact 2-imp", "eq.14", "largest relative deviation"):
         assert needle in text
-    assert [p.name for p in tmp_path.iterdir()] == ["impacts.csv"]
+    # the log and its provenance sidecar, no temporary file left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["impacts.csv", "impacts.json"]
 
 
 def test_orbit_below_barrier_reports_free_period(capsys):

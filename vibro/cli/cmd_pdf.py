@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
 
     from averaging import stationary_density
     from averaging.quadrature import turning_points
-    from hybrid.errors import ModelError, NormalisationError, VibroWarning
+    from hybrid.errors import ModelError, VibroWarning
     from vibro.provenance import record, sidecar_path, write_sidecar
 
     from .common import model_from_args
@@ -111,17 +111,13 @@ def run(args: argparse.Namespace) -> int:
         from vibro.solve import diagnose
         from vibro.solve.choice import averaging_refusal
 
-        try:
-            refusal = averaging_refusal(diagnose(model))
-        except NormalisationError:
-            raise
-        except ModelError as exc:  # the diagnosis needs what averaging needs: the same error, said once
-            raise ModelError(f"averaging does not apply: {exc}") from exc
+        # the density first: its own checks (energy scale, confinement) give the more precise refusal
+        sd = stationary_density(model, args.method, h_max=args.h_max, points=args.points)
+        refusal = averaging_refusal(diagnose(model))
         if refusal and not args.force:
             raise ModelError(f"{refusal}; use --method fpk or vibro mc, or --force to compute it anyway")
         if refusal:
             warnings.warn(f"--force: {refusal}", VibroWarning, stacklevel=2)
-        sd = stationary_density(model, args.method, h_max=args.h_max, points=args.points)
     try:
         atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
         if args.joint is not None:
