@@ -22,13 +22,11 @@ import sympy as sp
 from hybrid.errors import ModelError, ParameterError
 
 from . import _auto_codegen, _codegen, _rng
-from ._runner import ChatteringWarning
+from ._runner import MAX_PATH_STEPS, ChatteringWarning
 from ._statistics import Estimate, ratio_estimate
 
 COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside")
 """Names of the per-chunk counters, in the kernel's order."""
-MAX_PATH_STEPS = 1e13
-"""Refuse larger requests (override with ``max_path_steps``)."""
 
 
 @dataclass(frozen=True)
