@@ -22,7 +22,7 @@ import sympy as sp
 from hybrid.errors import ModelError, ParameterError
 
 from . import _auto_codegen, _codegen, _rng
-from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning
+from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, check_chunk_count
 from ._statistics import Estimate, ratio_estimate
 
 COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside")
@@ -317,6 +317,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
             f"the request is {work:.3g} path-steps (paths x (t_end / dt)), above the limit {max_path_steps:.3g}; "
             "reduce paths or t_end, raise dt, or pass a larger max_path_steps"
         )
+    check_chunk_count(paths, chunk_paths)  # before compiling: each chunk spawns its own stream
     values = automaton.resolve_parameters(params)
     n = len(automaton.states)
     try:

@@ -45,6 +45,9 @@ CHECKPOINT_FORMAT = 2
 
 MIN_CHUNKS_FOR_CI = 8
 """Fewer chunks than this make the batch-means intervals unreliable (a warning says so)."""
+MAX_CHUNKS = 2**20
+"""Most chunks of a CPU run: each needs its own spawned seed (about 30 s and 32 MB of states per million)."""
+
 OUTSIDE_WARN = 1e-3
 """Share of the samples outside a histogram's range above which :class:`HistogramRangeWarning` is raised."""
 
@@ -262,6 +265,24 @@ def _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_mem
             f"{nb.get_num_threads() + 3} copies), above the limit {max_memory / 1e9:.3g} GB; lower bins, xy_bins "
             "or v_bins, or raise the limit (max_memory=, --max-memory-gb)"
         )
+
+
+def check_chunk_count(paths: int, chunk_paths: int) -> int:
+    """The number of chunks; refuse more than :data:`MAX_CHUNKS` (each chunk spawns its own random stream).
+
+    Examples
+    --------
+    >>> check_chunk_count(10**6, 8)
+    125000
+    """
+    n_chunks = -(-paths // chunk_paths)
+    if n_chunks > MAX_CHUNKS:
+        raise ParameterError(
+            f"paths={paths} in chunks of {chunk_paths} makes {n_chunks} chunks, above the limit {MAX_CHUNKS} (each "
+            f"spawns its own random stream); pass chunk_paths >= {-(-paths // MAX_CHUNKS)} (the numbers then "
+            "depend on that chunk size, as always)"
+        )
+    return n_chunks
 
 
 def default_chunk_paths(paths: int) -> int:
@@ -656,6 +677,8 @@ def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execu
     if not (local or gpu or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")
             or hasattr(scheduler, "submit")):  # before compiling: a typo must not cost a kernel build
         raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS, cuda or a Client")
+    if not gpu:
+        check_chunk_count(settings["paths"], settings["chunk_paths"])
     if algorithm.precision != "f64" and not gpu:
         raise ParameterError(f"precision={algorithm.precision!r} needs scheduler='cuda' (the CPU kernels are "
                              "double only)")
