@@ -118,12 +118,22 @@ def test_nonlinear_damping_never_gets_the_exact_formula():
         solve(RayleighImpact(restitution=Elastic()), method="exact")
 
 
-def test_asymmetric_barriers_fall_back_to_monte_carlo_with_the_reason():
-    m = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(-0.5, 1.0),
-                         restitution=Newton(0.8))
-    ch = choose(m, tol=0.02, mc_pilot=False)
+@pytest.mark.parametrize("barriers", [(-0.5, 1.0), (0, None), (None, 0.8)])
+def test_unmeasured_geometries_fall_back_to_monte_carlo_with_the_reason(barriers):
+    # the error model was fitted on symmetric gaps: no accuracy is claimed for averaging or fpk elsewhere
+    from vibro.solve.choice import UnmeasuredAccuracyWarning
+
+    m = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=barriers, restitution=Newton(0.8))
+    with pytest.warns(UnmeasuredAccuracyWarning, match="not measured"):
+        ch = choose(m, tol=0.02, mc_pilot=False)
     assert ch.method == "monte-carlo"
-    assert "averaging does not apply" in ch.reason
+    assert "no data for this geometry" in ch.reason
+    assert all(math.isnan(ch.predictions[k]) for k in ("paper", "jump", "fpk"))
+
+
+def test_elastic_walls_of_any_geometry_are_exact():
+    m = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(-0.5, 1.0), restitution=Elastic())
+    assert choose(m, tol=0.02, mc_pilot=False).method == "exact"
 
 
 def test_bad_tolerance_is_refused():

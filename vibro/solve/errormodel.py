@@ -59,6 +59,10 @@ L1_BINS = 40
 def predict_averaging_error(method: str, diag: Diagnostics) -> float:
     """Predicted L1 distance of an averaging method from converged Monte Carlo (the fitted error model).
 
+    NaN (not measured) for ``paper``, ``jump``, ``exact-two-impact`` and ``fpk`` on a barrier geometry other than
+    a symmetric gap (or none): the constants were fitted there only. ``exact`` holds for any walls (it is the
+    elastic Gibbs density).
+
     Examples
     --------
     >>> from vibro.solve.diagnostics import Diagnostics
@@ -66,6 +70,8 @@ def predict_averaging_error(method: str, diag: Diagnostics) -> float:
     >>> predict_averaging_error("paper", d) == error_model()["paper"]["floor"]
     True
     """
+    if method != "exact" and getattr(diag, "geometry", "symmetric") not in ("none", "symmetric"):
+        return math.nan  # not measured: the constants were fitted on symmetric gaps only
     if method == "exact":
         m = error_model()["exact"]
         if not (diag.linear_damping and diag.additive_noise):
