@@ -246,21 +246,25 @@ def test_example_09_runs_headless_and_passes_its_checks():
 # ----------------------------------------------------------------------------- Monte Carlo (slow)
 
 @pytest.mark.slow
-def test_equilibrium_stop_averaging_error_against_monte_carlo_is_first_order_in_1_minus_r():
+def test_equilibrium_stop_averaging_error_against_monte_carlo_vanishes_at_least_like_1_minus_r():
+    # averaging overestimates E[H] (the impacts come every half period, not at random): 33 %, 13 %, 4 % at
+    # r = 0.6, 0.8, 0.9 with c = 0.05; the error falls at least linearly in 1 - r (faster once the impact loss is
+    # comparable with c)
     from hybrid.stochastic import simulate_ensemble
 
     rs = np.array([0.6, 0.8, 0.9])
     err, ci = [], []
     for r in rs:
         m = equilibrium_stop(r)
-        st = simulate_ensemble(m, "splitting", dt=0.005, paths=64, t_end=3200.0, t_burn=200.0, seed=11,
+        st = simulate_ensemble(m, "splitting", dt=0.005, paths=128, t_end=6200.0, t_burn=200.0, seed=11,
                                h_max=6.0, xy_bins=None, x0=(0.5, 0.0))
         avg = stationary_density(m, "jump", h_max=20.0).mean_energy
         err.append(avg / st.mean_energy.value - 1.0)
         ci.append(st.mean_energy.ci / st.mean_energy.value)
-    assert all(e > 3 * c for e, c in zip(err, ci))  # averaging overestimates E[H]: impacts are periodic, not random
+    assert all(e > 2 * c for e, c in zip(err, ci)), (err, ci)
+    assert np.all(np.diff(err) < 0), err
     slope = np.polyfit(np.log(1 - rs), np.log(err), 1)[0]
-    assert 0.8 < slope < 1.6, (slope, err, ci)
+    assert 0.9 < slope < 2.5, (slope, err, ci)
 
 
 @pytest.mark.slow
