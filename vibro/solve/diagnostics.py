@@ -94,7 +94,8 @@ def barrier_geometry(model) -> str:
     Examples
     --------
     >>> from models import DuffingImpact, ImpactOscillator
-    >>> barrier_geometry(DuffingImpact()), barrier_geometry(ImpactOscillator("x", barriers=(0, None)))
+    >>> stop = ImpactOscillator("x", parameters={"D": 0.1}, barriers=(0, None))
+    >>> barrier_geometry(DuffingImpact()), barrier_geometry(stop)
     ('symmetric', 'equilibrium')
     """
     from averaging.quadrature import geometry
