@@ -168,6 +168,9 @@ class ExactTwoImpactMethod(ImpactMethod):
 class JumpMethod(ImpactMethod):
     """Impacts as jumps of the averaged energy: H -> G(delta) + e(v)**2 (H - G(delta)) at rate 2/T(H).
 
+    On other geometries each wall w the level reaches jumps on its own: H -> G_w + e(v_w)**2 (H - G_w) at rate
+    1/T(H), v_w = sqrt(2 (H - G_w)).
+
     Examples
     --------
     >>> from models import Newton
@@ -177,7 +180,7 @@ class JumpMethod(ImpactMethod):
 
     name = "jump"
     jumps = True
-    description = "jump-diffusion: H -> G + e^2 (H - G) at rate 2/T(H)"
+    description = "jump-diffusion: H -> G_w + e^2 (H - G_w) at rate 1/T(H) for each wall w the level reaches"
 
 
 METHODS: dict[str, ImpactMethod] = {}

@@ -8,6 +8,8 @@ the *virtual* turning points beyond the barriers (where G, continued past the ba
 only up to arcsin((barrier - c)/r). The integrand stays analytic however close H is to G(delta), so the nearly
 singular behaviour at +-delta as H -> G(delta)+ costs nothing. When G cannot be continued to the level H beyond a
 barrier, the virtual turning point of its linearisation, delta + (H - G(delta))/g(delta), is used instead.
+Each side is cut on its own, so asymmetric walls (two impact levels) and a wall at the equilibrium (every level cut,
+the virtual turning point on the far side) use the same nodes.
 """
 
 from __future__ import annotations
@@ -32,7 +34,11 @@ def _gauss(n: int):
 
 
 class Geometry:
-    """The potential G, the force g, the barriers and G(delta) of a model at its parameter values (numpy).
+    """The potential G, the force g, the walls and their impact levels of a model at its parameter values (numpy).
+
+    ``wall_levels`` has one energy per finite wall, ``levels`` the distinct ones in increasing order (one for a
+    symmetric gap or a single wall, two for asymmetric walls), ``G_delta`` the lowest (0 for a wall at the
+    equilibrium, inf without walls).
 
     Cached per symbolic declaration and parameter values, so that repeated averaging does not touch sympy.
 

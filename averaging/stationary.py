@@ -217,7 +217,7 @@ class StationaryDensity:
 
     @property
     def barrier_energy(self) -> float:
-        """G(delta) (inf without barriers)."""
+        """The lowest impact level: G(delta) for a symmetric gap, 0 for a wall at the equilibrium, inf without walls."""
         return self.table.G_delta
 
     def density(self, H):
@@ -285,12 +285,12 @@ class StationaryDensity:
             return out
         Gx = Gx[ok]
         ymax = np.sqrt(2.0 * (self.h_support - Gx))
-        Gd = self.table.G_delta
-        ykink = np.sqrt(2.0 * np.clip(Gd - Gx, 0.0, None)) if np.isfinite(Gd) else ymax
-        ykink = np.minimum(ykink, ymax)
+        # p(x, y) has a kink where the level crosses an impact level (one per level; two for asymmetric walls)
+        kinks = [np.minimum(np.sqrt(2.0 * np.clip(L - Gx, 0.0, None)), ymax) for L in self.table.geometry.levels]
+        ys = np.sort(np.vstack([np.zeros_like(ymax)] + kinks + [ymax]), axis=0)
         t, w = np.polynomial.legendre.leggauss(nodes)
         total = np.zeros_like(Gx)
-        for lo, hi in ((np.zeros_like(ymax), ykink), (ykink, ymax)):
+        for lo, hi in zip(ys[:-1], ys[1:]):
             yy = 0.5 * (lo + hi)[:, None] + 0.5 * (hi - lo)[:, None] * t
             vals = self._joint_energy(np.minimum(0.5 * yy**2 + Gx[:, None], self.h_support))
             total += np.sum(vals * w, axis=1) * 0.5 * (hi - lo)
@@ -320,17 +320,15 @@ class StationaryDensity:
         # x range where H <= h_max, and the points where H crosses G(delta) (kinks of T)
         lo, hi = turning_points(self.model, self.h_support - kin)
         lo, hi = np.maximum(lo, left), np.minimum(hi, right)
-        Gd = self.table.G_delta
-        pieces = []
-        if np.isfinite(Gd):
-            lev = np.clip(Gd - kin, 1e-300, None)
+        # the x where H crosses an impact level (kinks of T): split there, one pair per level
+        cuts = [lo, hi]
+        for L in self.table.geometry.levels:
+            lev = np.clip(L - kin, 1e-300, None)
             klo, khi = turning_points(self.model, lev)
-            has = Gd - kin > 0
-            klo = np.where(has, np.maximum(klo, lo), 0.0)
-            khi = np.where(has, np.minimum(khi, hi), 0.0)
-            pieces = [(lo, klo), (klo, khi), (khi, hi)]
-        else:
-            pieces = [(lo, hi)]
+            has = L - kin > 0
+            cuts += [np.where(has, np.clip(klo, lo, hi), lo), np.where(has, np.clip(khi, lo, hi), lo)]
+        xs = np.sort(np.vstack(cuts), axis=0)
+        pieces = list(zip(xs[:-1], xs[1:]))
         t, w = np.polynomial.legendre.leggauss(nodes)
         total = np.zeros_like(kin)
         for a, b in pieces:

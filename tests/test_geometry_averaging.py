@@ -85,6 +85,20 @@ def test_elastic_walls_give_the_gibbs_density_for_every_geometry(name, method):
     assert sd.impact_rate == pytest.approx(rate, rel=1e-7)
 
 
+@pytest.mark.parametrize("name", ["asymmetric", "equilibrium-and-wall"])
+def test_elastic_marginals_are_the_gibbs_marginals(name):
+    # p(x) ~ exp(-c G(x) / D) on the walls' span, p(y) Gaussian of variance D / c
+    barriers = GEOMETRIES[name]
+    sd = stationary_density(duffing(barriers), "paper", h_max=30.0)
+    left, right = span(barriers)
+    z = integrate.quad(lambda x: math.exp(-C * G(x) / D), left, right, epsabs=0, epsrel=1e-12)[0]
+    x = np.linspace(left, right, 7)[1:-1]
+    np.testing.assert_allclose(sd.marginal_x(x), np.exp(-C * G(x) / D) / z, rtol=1e-7)
+    y = np.array([0.0, 0.4, 1.1])
+    np.testing.assert_allclose(sd.marginal_y(y), np.exp(-C * y**2 / (2 * D)) / math.sqrt(2 * math.pi * D / C),
+                               rtol=1e-7)
+
+
 def test_levels_and_walls_hit():
     geo = geometry(duffing((-0.6, 1.0)))
     assert geo.levels == pytest.approx((G(-0.6), G(1.0)), rel=1e-14)
