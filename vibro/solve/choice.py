@@ -12,9 +12,10 @@
 5. **Monte Carlo** otherwise, planned by :mod:`vibro.solve.planner`.
 
 The error model was fitted on symmetric gaps. For other walls (one-sided, asymmetric, a wall at the equilibrium)
-its predictions are NaN (not measured): the chooser does not pick paper, jump or fpk there (``exact`` still holds:
-the elastic Gibbs density does not depend on where the walls are), warns with
-:class:`UnmeasuredAccuracyWarning`, and says so in the reason.
+its predictions for paper and jump are NaN (not measured): the chooser does not pick them there and says so in the
+reason (``exact`` still holds: the elastic Gibbs density does not depend on where the walls are; ``fpk`` is rated
+where its floor was measured, :data:`~vibro.solve.errormodel.FPK_GEOMETRIES`). Forcing an unrated method warns
+with :class:`UnmeasuredAccuracyWarning`.
 
 The predicted error of each averaging method is the error model of :mod:`vibro.solve.errormodel`. Averaging is
 refused when the 90th-percentile energy level loses more than ``MAX_DAMPING_RATIO`` of its energy per cycle to the
@@ -142,10 +143,7 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     unmeasured = math.isnan(preds["paper"])
     if unmeasured and not refusal:
         reasons.append(f"{diag.geometry} walls: the averaging error model has no data for this geometry (fitted on "
-                       "symmetric gaps), so no accuracy of paper, jump or fpk is claimed")
-        warnings.warn(f"{diag.geometry} walls: averaging accuracy is not measured by the error model for this "
-                      "geometry; choosing Monte Carlo (force --method paper/jump for the cheap, unrated answer)",
-                      UnmeasuredAccuracyWarning, stacklevel=2)
+                       "symmetric gaps), so no accuracy of paper or jump is claimed and neither is chosen")
     if not refusal and not unmeasured:
         for name in ("paper", "jump"):  # cheapest first
             if preds[name] <= tol:
@@ -159,7 +157,8 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
             f"jump {preds['jump']:.3f})"
         )
     # the phase-plane solver of the full (x, y) problem: accurate to its measured floor, about a second; offered
-    # only where that floor was measured (the paper's quasi-conservative cases), not where averaging is refused
+    # only where that floor was measured (the paper's quasi-conservative cases and the equilibrium wall), not where
+    # averaging is refused
     preds["fpk"] = math.inf if refusal else predict_averaging_error("fpk", diag)
     if preds["fpk"] <= tol:  # False for NaN (not measured)
         why = "; ".join(reasons) + "; the phase-plane FPK solver (impacts as boundary conditions) reaches it"

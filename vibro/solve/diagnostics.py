@@ -82,7 +82,7 @@ class Diagnostics:
 
 
 CALIBRATED_GEOMETRIES = ("none", "symmetric")
-"""Geometries on which the averaging and fpk error models were fitted (the paper's symmetric gaps)."""
+"""Geometries on which the averaging error model was fitted (the paper's symmetric gaps)."""
 GEOMETRIES = ("none", "symmetric", "one-sided", "asymmetric", "equilibrium")
 """Barrier geometries the diagnosis tells apart (see :func:`barrier_geometry`)."""
 
@@ -265,7 +265,7 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     G_low = geometry(model).G_delta  # the lowest impact level (inf without walls)
     if kind not in CALIBRATED_GEOMETRIES:
         notes.append(f"{kind} walls: the averaging error model was fitted on symmetric gaps only, so no accuracy is "
-                     "predicted for paper, jump or fpk here (see benchmarks/geometry_averaging.py for measured L1)")
+                     "predicted for paper or jump here (see benchmarks/geometry_averaging.py for measured L1)")
     c = model.linear_damping_constant()
     s2 = model.constant_noise_intensity()
     law = model.restitution
