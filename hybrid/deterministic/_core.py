@@ -60,7 +60,7 @@ def _check_time(t0, t_end):
     return float(t0), float(t_end)
 
 
-def _check_inside(automaton, model, state, mode, values):
+def _check_inside(automaton, model, state, mode, values, t0=0.0):
     names = [s.name for s in automaton.states]
     if model is not None:
         left, right = model.barriers
@@ -82,7 +82,7 @@ def _check_inside(automaton, model, state, mode, values):
     for tr in automaton.transitions_from(mode):
         if tr.direction == 0:
             continue
-        g = to_callable([tr.guard], automaton.states, list(automaton.parameters))(state, list(values.values()))[0]
+        g = to_callable([tr.guard], automaton.states, [*automaton.parameters, "t"])(state, [*values.values(), t0])[0]
         if tr.direction * g > 1e-12 * max(1.0, float(np.max(np.abs(state)))):
             raise ParameterError(
                 f"initial state {dict(zip(names, state.tolist()))} is already past the guard of transition "
@@ -220,7 +220,7 @@ def simulate_orbit(
     # a NaN spread limit would make every run of decreasing intervals look geometric
     if not (isinstance(zeno_rtol, (int, float)) and math.isfinite(zeno_rtol) and zeno_rtol >= 0):
         raise ParameterError(f"zeno_rtol={zeno_rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
-    _check_inside(automaton, model, state, mode, values)
+    _check_inside(automaton, model, state, mode, values, t0)
 
     if isinstance(backend, str):
         if backend not in BACKENDS:
@@ -232,8 +232,8 @@ def simulate_orbit(
         raise ParameterError(f"backend must be a name in {sorted(BACKENDS)} or an OrbitBackend subclass")
     engine = backend_cls(automaton, values, rtol=rtol, atol=atol, dense=dense, **options)
 
-    pnames = list(automaton.parameters)
-    pvalues = [values[p] for p in pnames]
+    pnames = [*automaton.parameters, "t"]  # resets and observables may read the time (a moving table)
+    pvalues = [values[p] for p in automaton.parameters]
     resets = {}
     for tr in automaton.transitions:
         resets[tr.name] = (to_callable(tr.reset, automaton.states, pnames) if tr.symbolic_reset else tr.reset)
@@ -267,9 +267,9 @@ def simulate_orbit(
         tr = automaton.transitions[step.fired]
         try:
             if tr.symbolic_reset:
-                new = np.array(resets[tr.name](state, pvalues), dtype=float)
+                new = np.array(resets[tr.name](state, [*pvalues, t]), dtype=float)
             else:
-                new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+                new = np.asarray(resets[tr.name](state.copy(), {**values, "t": t}), dtype=float)
         except VibroError:
             raise
         except Exception as exc:  # a user reset or restitution callable that fails: one line, with where
@@ -287,8 +287,8 @@ def simulate_orbit(
         rows_tgt.append(tr.target)
         before.append(state)
         after.append(new)
-        ob_before.append(observe(state, pvalues))
-        ob_after.append(observe(new, pvalues))
+        ob_before.append(observe(state, [*pvalues, t]))
+        ob_after.append(observe(new, [*pvalues, t]))
         state, mode = new, tr.target
         if dense:
             engine.samples.append((t, new.copy(), mode))

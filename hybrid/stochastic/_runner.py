@@ -582,6 +582,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     >>> s.violations  # doctest: +SKIP
     0
     """
+    _codegen.refuse_forced(model)
     sch = get_scheme(scheme)
     x0 = _as_x0(x0)
     settings = _settings(model, sch, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride,

@@ -77,7 +77,8 @@ class Diagnostics:
 
 
 def _check_averagable(model) -> None:
-    """The energy-envelope methods need one confining single well and symmetric barriers."""
+    """The energy-envelope methods need an autonomous model, one confining single well and symmetric barriers."""
+    model.require_autonomous()
     model.check_single_well()
     if model.has_barriers:
         _ = model.barrier_energy  # raises ModelError for asymmetric barriers
