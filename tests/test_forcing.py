@@ -276,3 +276,17 @@ def test_forced_duffing_impact_backends_agree():
     if hey.n_impacts:
         assert np.max(np.abs(hey.impacts.t - sci.impacts.t)) < 1e-7
     assert np.allclose(hey.state, sci.state, atol=1e-7)
+
+
+def test_example_08_runs_headless_and_passes_its_checks():
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    res = subprocess.run([sys.executable, str(root / "examples" / "08_harmonic_random.py"), "--quick"],
+                         capture_output=True, text=True, timeout=600, cwd=root,
+                         env=dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(root)))
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert res.stdout.strip().splitlines()[-1] == "OK"
