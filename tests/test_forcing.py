@@ -290,3 +290,20 @@ def test_example_08_runs_headless_and_passes_its_checks():
                          env=dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(root)))
     assert res.returncode == 0, res.stdout + res.stderr
     assert res.stdout.strip().splitlines()[-1] == "OK"
+
+
+def test_vibro_orbit_runs_a_forced_model_and_vibro_pdf_refuses_it(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=root)
+    base = [sys.executable, "-m", "vibro"]
+    res = subprocess.run([*base, "orbit", "--model", "duffing-forced", "--param", "A=0.5", "--t-end", "30", "--out",
+                          str(tmp_path / "o.csv")], capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "the model is forced" in res.stdout and (tmp_path / "o.csv").is_file()
+    res = subprocess.run([*base, "pdf", "--model", "duffing-forced", "--out", str(tmp_path / "p.csv")],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 2 and "vibro mc" in res.stderr and len(res.stderr.strip().splitlines()) == 1
