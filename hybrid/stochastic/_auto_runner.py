@@ -192,8 +192,13 @@ class AutomatonEnsemble:
 
         Examples
         --------
-        >>> ens = _example_forced()                       # doctest: +SKIP
-        >>> ens.phase_mean("x", 0).value                  # doctest: +SKIP
+        >>> from models import ImpactOscillator
+        >>> m = ImpactOscillator("x", "c*y", forcing="A*cos(W*t)", parameters={"c": 0.5, "A": 0.4, "W": 1.3,
+        ...                      "D": 0.05}, barriers=None)
+        >>> ens = simulate_automaton(m.to_automaton(), "splitting", dt=0.01, paths=16, t_end=100.0, t_burn=20.0,
+        ...                          x0=(0, 0), seed=1, observables={"x": "x"}, histograms={"x": (-3, 3, 60)},
+        ...                          phases=4, period=m.forcing_period)          # doctest: +SKIP
+        >>> ens.phase_mean("x", 0)                        # doctest: +SKIP
         """
         k = self._phase_index(k)
         o = self.names.index(name)
