@@ -127,7 +127,9 @@ def simulate_orbit(
 
     The flow of the current mode is integrated until a guard crosses zero in its declared direction; the crossing
     is located exactly (heyoka: terminal Taylor events; scipy: root of the dense output), the reset is applied, the
-    transition is logged and the integration resumes, until ``t_end``.
+    transition is logged and the integration resumes, until ``t_end``. Flows, guards, resets and observables may use
+    the absolute time ``t`` (a forcing, a moving barrier): heyoka reads it as its own time variable, scipy as the
+    right-hand side's t, and a reset sees the time of its event.
 
     Parameters
     ----------

@@ -6,7 +6,8 @@ damping reuses the compiled integrator. Automata with several modes share one in
 parameter (1 for the current mode, 0 otherwise) multiplying its flow, and a guard of an inactive mode reads
 ``w * guard + (1 - w) = 1``, which never crosses zero. Every transition is a terminal event without callback:
 the integration stops at the crossing, the driver applies the reset in Python and resumes. heyoka's automatic
-cooldown keeps the event that just fired from firing again at the same instant.
+cooldown keeps the event that just fired from firing again at the same instant. The time ``t`` in flows and guards is
+heyoka's own time expression (``heyoka.time``), so a forcing or a moving guard is part of the Taylor expansion.
 
 Limitation: with several modes every flow is evaluated (times its 0/1 weight), so a flow that is not finite
 somewhere (a division by zero in an inactive mode) spoils the others; use the scipy backend for such automata.
