@@ -36,6 +36,7 @@ def energy_table(model, h_max: float, nodes: int = DEFAULT_NODES) -> EnergyTable
     >>> energy_table(DuffingImpact(), 4.0) is energy_table(DuffingImpact(), 4.0)
     True
     """
+    model.require_autonomous()
     key = (fingerprint(model), tuple(sorted(model.params.items())), float(h_max), int(nodes))
     tab = _TABLES.get(key)
     if tab is None:
@@ -518,6 +519,7 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
     >>> 0.0 < sd.prob_below_barrier < 1.0
     True
     """
+    model.require_autonomous()
     import warnings
 
     from hybrid.errors import TruncationWarning

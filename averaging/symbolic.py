@@ -80,6 +80,7 @@ class AveragingEquations:
     """
 
     def __init__(self, model):
+        model.require_autonomous()
         self.model = model
         self.drift = model.ito_drift
         self.diffusion_squared = model.diffusion_squared

@@ -1,6 +1,6 @@
 """Impact models: restitution laws, the impact-oscillator base class and the paper's examples."""
 
-from .builtin import MODELS, DuffingImpact, DuffingVanDerPolImpact, RayleighImpact, make_model
+from .builtin import MODELS, DuffingImpact, DuffingVanDerPolImpact, ForcedDuffingImpact, RayleighImpact, make_model
 from .oscillator import ImpactOscillator, X, Y
 from .restitution import (
     SPEED,
@@ -14,5 +14,6 @@ from .restitution import (
 
 __all__ = [
     "MODELS", "SPEED", "X", "Y", "CustomRestitution", "DuffingImpact", "DuffingVanDerPolImpact", "Elastic",
-    "ImpactOscillator", "Ma", "Newton", "RayleighImpact", "RestitutionLaw", "make_model", "parse_restitution",
+    "ForcedDuffingImpact", "ImpactOscillator", "Ma", "Newton", "RayleighImpact", "RestitutionLaw", "make_model",
+    "parse_restitution",
 ]

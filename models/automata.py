@@ -1,8 +1,8 @@
 """Impact models beyond one oscillator, declared directly as hybrid automata (a few lines each).
 
 Every function returns a :class:`hybrid.HybridAutomaton` with named parameters, an energy observable ``H`` and
-the observables the examples plot. They run through ``hybrid.stochastic.simulate_automaton`` (and, without time
-in their expressions, through ``hybrid.deterministic.simulate_orbit``).
+the observables the examples plot. They run through ``hybrid.stochastic.simulate_automaton`` and
+``hybrid.deterministic.simulate_orbit`` (both take the time ``t`` in flows, guards and resets).
 """
 
 from __future__ import annotations

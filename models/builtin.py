@@ -115,8 +115,44 @@ class RayleighImpact(ImpactOscillator):
         )
 
 
+class ForcedDuffingImpact(ImpactOscillator):
+    """Example 1 with harmonic forcing: x'' + c x' + a x + b x**3 = A cos(Omega t + phi) + xi(t), |x| < delta.
+
+    A forced model: orbits and Monte Carlo (through its automaton, with phase-resolved statistics) run; the
+    averaging methods refuse it. ``vibro mc --model duffing-forced --param A=0.3 --param Omega=1.2 --phases 8``.
+
+    Examples
+    --------
+    >>> m = ForcedDuffingImpact(Omega=2.0)
+    >>> m.is_forced, round(m.forcing_period, 12)
+    (True, 3.14159265359)
+    """
+
+    name = "duffing-forced"
+
+    def __init__(self, restitution: RestitutionLaw | None = None, **params: float):
+        defaults = {"a": 1.0, "b": 0.2, "c": 0.025, "D": 0.05, "delta": 1.0, "A": 0.2, "Omega": 1.2, "phi": 0.0}
+        unknown = set(params) - set(defaults)
+        if unknown:
+            from hybrid.errors import ParameterError
+
+            raise ParameterError(f"unknown parameters {sorted(unknown)} for duffing-forced; known: {sorted(defaults)}")
+        super().__init__(
+            restoring="a*x + b*x**3",
+            damping="c*y",
+            noise=(1,),
+            intensity="D",
+            parameters={**defaults, **params},
+            restitution=restitution if restitution is not None else Ma(vc=0.4),
+            forcing="A*cos(Omega*t + phi)",
+        )
+
+    amplitude = DuffingImpact.amplitude
+
+
 MODELS: dict[str, type[ImpactOscillator]] = {
     "duffing": DuffingImpact,
+    "duffing-forced": ForcedDuffingImpact,
     "duffing-vdp": DuffingVanDerPolImpact,
     "rayleigh": RayleighImpact,
 }

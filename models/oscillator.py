@@ -2,9 +2,10 @@
 
 A model is the equation of motion of the paper (eq. 1)
 
-    x'' + g(x) + eps * h(x, x') = eps**(1/2) * f_k(x, x') * xi_k(t),   x_left < x < x_right,
+    x'' + g(x) + eps * h(x, x') = F(t, x, x') + eps**(1/2) * f_k(x, x') * xi_k(t),   x_left < x < x_right,
 
-with E[xi_k(t) xi_l(t + s)] = 2 D_kl delta(s), and impacts v+ = -e(|v-|) v- at the barriers. The user gives g, h,
+with E[xi_k(t) xi_l(t + s)] = 2 D_kl delta(s), impacts v+ = -e(|v-|) v- at the barriers, and an optional
+deterministic forcing F (``forcing="A*cos(Omega*t + phi)"``; zero in the paper). The user gives g, h,
 f_k and D_kl as sympy expressions (or strings) of the state symbols ``x`` and ``y`` (y = x') and of named
 parameters. The model derives the potential G, the energy H, the Itô drift and diffusion, the turning points and
 the hybrid automaton.
@@ -29,6 +30,8 @@ from .restitution import Elastic, RestitutionLaw
 
 X = real_symbol("x")
 """Displacement symbol."""
+T = real_symbol("t")
+"""Time symbol (only the forcing F may use it)."""
 Y = real_symbol("y")
 """Velocity symbol (y = dx/dt)."""
 
@@ -54,6 +57,13 @@ class ImpactOscillator:
     restitution : RestitutionLaw
     epsilon : expression
         The small parameter of eq. 1 (1 in the paper's examples).
+    forcing : expression in t (and x, y), optional
+        A deterministic force F on the right-hand side, e.g. ``"A*cos(Omega*t + phi)"`` (harmonic forcing). Terms of
+        ``restoring`` that contain ``t`` are moved here with their sign flipped, so ``restoring="x - A*cos(W*t)"``
+        means g = x and F = A cos(W t). The energy H and the potential G stay those of the unforced g. A forced
+        model runs in the orbit backends and in Monte Carlo through its automaton
+        (``hybrid.stochastic.simulate_automaton``, ``vibro mc``); the averaging methods refuse it. The forcing
+        frequencies (the factors of t inside sin and cos) must be finite and non-zero.
     nonnegative, positive : sequences of parameter names
         Parameters that must be >= 0 (noise intensities) or > 0 (barrier distances).
     name : str
@@ -84,6 +94,7 @@ class ImpactOscillator:
         nonnegative: Sequence[str] = ("D",),
         positive: Sequence[str] = ("delta",),
         name: str | None = None,
+        forcing=0,
     ):
         if name is not None:
             self.name = name
@@ -94,8 +105,15 @@ class ImpactOscillator:
         self._declaration = dict(
             restoring=restoring, damping=damping, noise=tuple(noise), intensity=intensity,
             barriers=barriers, epsilon=epsilon, nonnegative=tuple(nonnegative), positive=tuple(positive),
+            forcing=forcing,
         )
         self.g = _as_expr(restoring, "restoring force g(x)")
+        self.forcing = _as_expr(forcing, "forcing F(t)")
+        if T in self.g.free_symbols:
+            # the time-dependent terms of g are a forcing: F gets them with the opposite sign, G stays autonomous
+            timed = sp.Add(*[a for a in sp.Add.make_args(sp.expand(self.g)) if T in a.free_symbols])
+            self.g = sp.expand(self.g) - timed
+            self.forcing = self.forcing - timed
         self.h = _as_expr(damping, "damping h(x, y)")
         self.f = tuple(_as_expr(fk, f"noise coefficient f_{k + 1}") for k, fk in enumerate(noise))
         if not self.f:
@@ -165,6 +183,12 @@ class ImpactOscillator:
 
     def _check_symbols(self) -> None:
         known = {"x", "y"} | set(self.params)
+        if "t" in self.params:
+            raise ModelError("the name 't' is reserved for time (the forcing F(t)); rename that parameter")
+        unknown = {s.name for s in self.forcing.free_symbols} - known - {"t"}
+        if unknown:
+            raise ModelError(f"forcing F uses {sorted(unknown)}, which are neither t, x, y nor parameters "
+                             f"{sorted(self.params)}; add them to parameters={{...}}")
         exprs = {"g": self.g, "h": self.h, "epsilon": self.epsilon}
         exprs.update({f"f_{k + 1}": f for k, f in enumerate(self.f)})
         exprs.update({"D": self.intensity})
@@ -172,12 +196,17 @@ class ImpactOscillator:
             exprs.update({"left barrier": self.barrier_exprs[0], "right barrier": self.barrier_exprs[1]})
         for where, e in exprs.items():
             unknown = {s.name for s in e.free_symbols} - known
+            if "t" in unknown:
+                raise ModelError(f"{where} uses the time t: only the forcing may depend on time (forcing="
+                                 "'A*cos(Omega*t)'); for a moving barrier declare a HybridAutomaton (see "
+                                 "models.automata.vibrating_table)")
             if unknown:
                 raise ModelError(
                     f"{where} uses {sorted(unknown)}, which are neither the states x, y nor parameters "
                     f"{sorted(self.params)}; add them to parameters={{...}}"
                 )
         self._check_intensity()
+        self._forcing_frequencies()
         if Y in self.g.free_symbols:
             raise ModelError("the restoring force g may depend on x only; put velocity terms in the damping h(x, y)")
         if self.barrier_exprs is not None:
@@ -374,8 +403,10 @@ class ImpactOscillator:
         Raises
         ------
         ModelError
-            When the potential does not confine, or has several wells inside the barriers.
+            When the potential does not confine, or has several wells inside the barriers, or the model is forced
+            (the averaging needs an autonomous model).
         """
+        self.require_autonomous()
         left, right = self.barriers
         span_l = left if np.isfinite(left) else -50.0
         span_r = right if np.isfinite(right) else 50.0
@@ -437,7 +468,7 @@ class ImpactOscillator:
         """m(x, y) = -g - eps*h + eps * D_jk f_j df_k/dy (eq. 16: Itô form with the Wong-Zakai term)."""
         m = len(self.f)
         wz = sum(self.intensity[j, k] * self.f[j] * sp.diff(self.f[k], Y) for j in range(m) for k in range(m))
-        return sp.expand(-self.g - self.epsilon * self.h + self.epsilon * wz)
+        return sp.expand(-self.g - self.epsilon * self.h + self.forcing + self.epsilon * wz)
 
     @cached_property
     def diffusion_squared(self) -> sp.Expr:
@@ -482,6 +513,80 @@ class ImpactOscillator:
         """True when sigma does not depend on the state (Milstein then reduces to Euler-Maruyama)."""
         return not (self.diffusion_squared.free_symbols & {X, Y})
 
+    # ------------------------------------------------------------------ forcing
+    @property
+    def is_forced(self) -> bool:
+        """True when the model has a deterministic forcing F (its equations depend on time).
+
+        Examples
+        --------
+        >>> m = ImpactOscillator("x", forcing="A*cos(W*t)", parameters={"A": 0.1, "W": 1.0, "D": 0.0}, barriers=None)
+        >>> m.is_forced, ImpactOscillator("x", parameters={"D": 0.0}, barriers=None).is_forced
+        (True, False)
+        """
+        return self.forcing != 0
+
+    def _forcing_frequencies(self) -> list[float]:
+        """The angular frequencies |w| of the sin/cos(w t + ...) terms of F, checked finite and non-zero."""
+        out = []
+        for fn in self.forcing.atoms(sp.sin, sp.cos):  # symbolic: Omega = 0 must not make the term vanish first
+            arg = fn.args[0]
+            if T not in arg.free_symbols:
+                continue
+            rate = sp.diff(arg, T)
+            if rate.free_symbols & {T, X, Y}:
+                continue  # not harmonic in t (a chirp, or a phase that depends on the state): no period
+            w = float(self.substitute(rate))
+            if not (np.isfinite(w) and w != 0.0):
+                raise ParameterError(f"forcing frequency {rate} = {w!r} in F = {self.forcing}: a harmonic forcing "
+                                     "needs a finite, non-zero frequency (a constant load belongs in the restoring "
+                                     "force)")
+            out.append(abs(w))
+        return sorted(set(out))
+
+    @property
+    def forcing_period(self) -> float | None:
+        """The period of the forcing, 2 pi / w for harmonic terms whose frequencies are integer multiples of the
+        lowest w; None when the model is unforced or F is not periodic in that way.
+
+        Examples
+        --------
+        >>> m = ImpactOscillator("x", forcing="A*cos(W*t) + B*sin(3*W*t)",
+        ...                      parameters={"A": 0.1, "B": 0.0, "W": 2.0, "D": 0.0}, barriers=None)
+        >>> round(m.forcing_period, 12)
+        3.14159265359
+        """
+        if not self.is_forced:
+            return None
+        F = self.substitute(self.forcing)
+        w = self._forcing_frequencies()
+        if not w:
+            return None
+        # F may only depend on t through those harmonic terms
+        trig = {fn: sp.Dummy() for fn in F.atoms(sp.sin, sp.cos) if T in fn.free_symbols}
+        if T in F.xreplace(trig).free_symbols:
+            return None
+        ratios = [v / w[0] for v in w]
+        if any(abs(r - round(r)) > 1e-9 * r for r in ratios):
+            return None
+        return 2.0 * np.pi / w[0]
+
+    def require_autonomous(self, what: str = "the averaging methods") -> None:
+        """Raise :class:`ModelError` when the model is forced (``what`` needs a time-independent model).
+
+        Examples
+        --------
+        >>> m = ImpactOscillator("x", forcing="A*cos(W*t)", parameters={"A": 0.1, "W": 1.0, "D": 0.1}, barriers=None)
+        >>> m.require_autonomous()  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        hybrid.errors.ModelError: the averaging methods need a model without time dependence, ... or orbits (...)
+        """
+        if self.is_forced:
+            raise ModelError(f"{what} need a model without time dependence, but this one is forced by F = "
+                             f"{self.forcing}; use Monte Carlo (vibro mc, hybrid.stochastic.simulate_automaton("
+                             "model.to_automaton(), ...)) or orbits (vibro orbit, simulate_orbit)")
+
     # ------------------------------------------------------------------ automaton
     def to_automaton(self) -> HybridAutomaton:
         """The hybrid automaton: one mode ``free`` and one transition per finite barrier.
@@ -494,7 +599,7 @@ class ImpactOscillator:
         >>> [t.name for t in DuffingImpact().to_automaton().transitions]
         ['right', 'left']
         """
-        flow = (Y, -self.g - self.epsilon * self.h)
+        flow = (Y, -self.g - self.epsilon * self.h + self.forcing)
         noise = (sp.Integer(0), sp.sqrt(self.diffusion_squared))
         mode = Mode("free", flow, noise)
         transitions = []
@@ -526,7 +631,7 @@ class ImpactOscillator:
         """A hash of the symbolic declaration (not the parameter values): the key for cached compiled kernels."""
         text = "|".join(
             [str(self.g), str(self.h), ";".join(map(str, self.f)), str(self.intensity), str(self.epsilon),
-             str(self.barrier_exprs), ",".join(self.params)]
+             str(self.barrier_exprs), ",".join(self.params)] + ([f"F={self.forcing}"] if self.is_forced else [])
         )
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -538,6 +643,7 @@ class ImpactOscillator:
             "D": str(self.intensity.tolist()), "epsilon": str(self.epsilon),
             "barriers": list(self.barriers), "parameters": dict(self.params),
             "restitution": self.restitution.spec(),
+            **({"forcing": str(self.forcing), "forcing_period": self.forcing_period} if self.is_forced else {}),
         }
 
     def __repr__(self) -> str:

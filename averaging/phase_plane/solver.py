@@ -305,6 +305,7 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
     >>> sorted(sd.impact_rates), sd.impact_rate > 0
     (['right'], True)
     """
+    model.require_autonomous()
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     try:

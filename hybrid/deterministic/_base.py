@@ -12,7 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hybrid.automaton import HybridAutomaton
+from hybrid.automaton import HybridAutomaton, real_symbol
+
+TIME = real_symbol("t")
+"""The time symbol: flows, guards and resets may use it (forcing, moving barriers)."""
 
 
 @dataclass
@@ -82,7 +85,8 @@ class OrbitBackend:
             idx = [j for j in self._active[mode] if a.transitions[j].direction != 0]
             args = [sp.Symbol(f"_s{i}") for i in range(len(a.states))] + [sp.Symbol(f"_p{i}") for i in
                                                                              range(len(a.parameters))]
-            by_name = dict(zip([s.name for s in a.states] + list(a.parameters), args))
+            args.append(sp.Symbol("_time"))  # guards may move with time (a vibrating table)
+            by_name = dict(zip([s.name for s in a.states] + list(a.parameters) + ["t"], args))
             exprs = []
             for j in idx:
                 g = a.transitions[j].guard
@@ -97,13 +101,14 @@ class OrbitBackend:
             cache[mode] = (idx, fn)
         return cache[mode]
 
-    def signed_guards(self, state, mode) -> tuple[list, list]:
-        """(direction * guard for each directed guard of ``mode``, the state as a list): > 0 is past a guard."""
+    def signed_guards(self, state, mode, t: float = 0.0) -> tuple[list, list, float]:
+        """(direction * guard for each directed guard of ``mode`` at time ``t``, the state as a list, t): > 0 is past.
+        """
         y = state.tolist() if isinstance(state, np.ndarray) else [float(v) for v in state]  # a copy, not a view
-        return self._directed(mode)[1](*y, *self._values), y
+        return self._directed(mode)[1](*y, *self._values, float(t)), y, float(t)
 
-    def _signed_rate(self, j: int, mode: str, state) -> float:
-        """direction * d guard_j / dt along the flow of ``mode`` at ``state`` (its Lie derivative)."""
+    def _signed_rate(self, j: int, mode: str, state, t: float = 0.0) -> float:
+        """direction * d guard_j / dt along the flow of ``mode`` at ``state`` and time ``t`` (its Lie derivative)."""
         import sympy as sp
 
         from ._convert import to_callable
@@ -112,9 +117,10 @@ class OrbitBackend:
         if (mode, j) not in rates:
             a = self.automaton
             flow = a.mode(mode).flow
-            expr = sum(sp.diff(a.transitions[j].guard, s) * f for s, f in zip(a.states, flow))
-            rates[(mode, j)] = to_callable([expr], a.states, list(a.parameters))
-        return self.automaton.transitions[j].direction * rates[(mode, j)](np.array(state), self._values)[0]
+            guard = a.transitions[j].guard
+            expr = sum(sp.diff(guard, s) * f for s, f in zip(a.states, flow)) + sp.diff(guard, TIME)
+            rates[(mode, j)] = to_callable([expr], a.states, [*a.parameters, "t"])
+        return self.automaton.transitions[j].direction * rates[(mode, j)](np.array(state), [*self._values, t])[0]
 
     def check_step(self, t: float, state, mode: str, before: tuple) -> tuple[str | None, tuple]:
         """(message or None, :meth:`signed_guards` at ``state``) after a step that ended at ``state``.
@@ -125,19 +131,19 @@ class OrbitBackend:
         through a wall). Not missed: a guard past already at the start, and in the first step after a start or
         reset a guard at zero that the flow carries through (a marker transition, as at a start on it).
         """
-        after = self.signed_guards(state, mode)
-        new, y = after
+        after = self.signed_guards(state, mode, t)
+        new, y, _ = after
         tol = ADMISSIBLE_RTOL * max(1.0, max(abs(v) for v in y))
         if all(g <= tol for g in new):  # the usual case, fast
             return None, after
-        old, y0 = before
+        old, y0, t0 = before
         idx = self._directed(mode)[0]
         for j, g0, g1 in zip(idx, old, new):
             if g1 <= tol:
                 continue
             # in the first step after a (re)start, a guard that starts at zero may legitimately be left through its
             # firing side (a start on a marker, a marker with an identity reset): starting on a guard is no crossing
-            if self.fresh and g0 > -tol and self._signed_rate(j, mode, y0) > 0.0 and g1 == g1:
+            if self.fresh and g0 > -tol and self._signed_rate(j, mode, y0, t0) > 0.0 and g1 == g1:
                 continue
             if g0 <= tol or g1 != g1:
                 tr = self.automaton.transitions[j]

@@ -60,7 +60,7 @@ def _check_time(t0, t_end):
     return float(t0), float(t_end)
 
 
-def _check_inside(automaton, model, state, mode, values):
+def _check_inside(automaton, model, state, mode, values, t0=0.0):
     names = [s.name for s in automaton.states]
     if model is not None:
         left, right = model.barriers
@@ -82,7 +82,7 @@ def _check_inside(automaton, model, state, mode, values):
     for tr in automaton.transitions_from(mode):
         if tr.direction == 0:
             continue
-        g = to_callable([tr.guard], automaton.states, list(automaton.parameters))(state, list(values.values()))[0]
+        g = to_callable([tr.guard], automaton.states, [*automaton.parameters, "t"])(state, [*values.values(), t0])[0]
         if tr.direction * g > 1e-12 * max(1.0, float(np.max(np.abs(state)))):
             raise ParameterError(
                 f"initial state {dict(zip(names, state.tolist()))} is already past the guard of transition "
@@ -127,7 +127,9 @@ def simulate_orbit(
 
     The flow of the current mode is integrated until a guard crosses zero in its declared direction; the crossing
     is located exactly (heyoka: terminal Taylor events; scipy: root of the dense output), the reset is applied, the
-    transition is logged and the integration resumes, until ``t_end``.
+    transition is logged and the integration resumes, until ``t_end``. Flows, guards, resets and observables may use
+    the absolute time ``t`` (a forcing, a moving barrier): heyoka reads it as its own time variable, scipy as the
+    right-hand side's t, and a reset sees the time of its event.
 
     Parameters
     ----------
@@ -235,7 +237,7 @@ def _validate(automaton, model, values, x0, t0, t_end, mode, min_dwell, max_impa
     # a NaN spread limit would make every run of decreasing intervals look geometric
     if not (isinstance(zeno_rtol, (int, float)) and math.isfinite(zeno_rtol) and zeno_rtol >= 0):
         raise ParameterError(f"zeno_rtol={zeno_rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
-    _check_inside(automaton, model, state, mode, values)
+    _check_inside(automaton, model, state, mode, values, t0)
     return t0, t_end, state, mode
 
 
@@ -258,8 +260,8 @@ class _EventLoop:
     def __init__(self, automaton, values, model, engine, zeno, dense):
         self.automaton, self.values, self.model, self.engine = automaton, values, model, engine
         self.zeno, self.dense = zeno, dense
-        self.pnames = list(automaton.parameters)
-        self.pvalues = [values[p] for p in self.pnames]
+        self.pnames = [*automaton.parameters, "t"]  # resets and observables may read the time (a moving table)
+        self.pvalues = [values[p] for p in automaton.parameters]
         self.resets = {tr.name: (to_callable(tr.reset, automaton.states, self.pnames) if tr.symbolic_reset
                                  else tr.reset) for tr in automaton.transitions}
         self.obs_names = list(automaton.observables)
@@ -301,9 +303,10 @@ class _EventLoop:
                 return
             if self.model is not None:
                 _check_coefficient(self.model, t, state, new)
+            now = [*self.pvalues, t]
             for key, value in (("t", t), ("transition", tr.name), ("source", tr.source), ("target", tr.target),
-                               ("before", state), ("after", new), ("ob_before", self.observe(state, self.pvalues)),
-                               ("ob_after", self.observe(new, self.pvalues))):
+                               ("before", state), ("after", new), ("ob_before", self.observe(state, now)),
+                               ("ob_after", self.observe(new, now))):
                 rows[key].append(value)
             state, mode = new, tr.target
             self.state, self.mode = state, mode
@@ -332,8 +335,8 @@ class _EventLoop:
     def _reset(self, tr, t, state) -> np.ndarray:
         try:
             if tr.symbolic_reset:
-                return np.array(self.resets[tr.name](state, self.pvalues), dtype=float)
-            return np.asarray(self.resets[tr.name](state.copy(), dict(self.values)), dtype=float)
+                return np.array(self.resets[tr.name](state, [*self.pvalues, t]), dtype=float)
+            return np.asarray(self.resets[tr.name](state.copy(), {**self.values, "t": t}), dtype=float)
         except VibroError:
             raise
         except Exception as exc:  # a user reset or restitution callable that fails: one line, with where

@@ -6,7 +6,8 @@ damping reuses the compiled integrator. Automata with several modes share one in
 parameter (1 for the current mode, 0 otherwise) multiplying its flow, and a guard of an inactive mode reads
 ``w * guard + (1 - w) = 1``, which never crosses zero. Every transition is a terminal event without callback:
 the integration stops at the crossing, the driver applies the reset in Python and resumes. heyoka's automatic
-cooldown keeps the event that just fired from firing again at the same instant.
+cooldown keeps the event that just fired from firing again at the same instant. The time ``t`` in flows and guards is
+heyoka's own time expression (``heyoka.time``), so a forcing or a moving guard is part of the Taylor expansion.
 
 Limitation: with several modes every flow is evaluated (times its 0/1 weight), so a flow that is not finite
 somewhere (a division by zero in an inactive mode) spoils the others; use the scipy backend for such automata.
@@ -41,6 +42,7 @@ def _compile(automaton, tol):
     symbols = dict(zip(names, variables))
     index = parameter_indices(automaton)
     symbols.update({p: hy.par[i] for p, i in index.items() if not p.startswith("mode:")})
+    symbols["t"] = hy.time  # forcing and moving guards: heyoka's own time, exact in the Taylor expansion
     multi = len(automaton.modes) > 1
     weights = [hy.par[index[f"mode:{m.name}"]] for m in automaton.modes] if multi else []
 
@@ -156,7 +158,7 @@ class HeyokaBackend(OrbitBackend):
         self.mode = automaton.initial_mode
         pnames = list(automaton.parameters)
         self._values = [self.params[p] for p in pnames]
-        self._guards = [to_callable([t.guard], automaton.states, pnames) for t in automaton.transitions]
+        self._guards = [to_callable([t.guard], automaton.states, [*pnames, "t"]) for t in automaton.transitions]
         self._active = {
             m.name: [j for j, t in enumerate(automaton.transitions) if t.source == m.name] for m in automaton.modes
         }
@@ -164,7 +166,8 @@ class HeyokaBackend(OrbitBackend):
 
     def _zero_guards(self, state, mode, skip) -> set:
         """Transitions of ``mode`` whose guard is exactly zero at ``state`` (``skip`` is in heyoka's cooldown)."""
-        return {j for j in self._active[mode] if j != skip and self._guards[j](state, self._values)[0] == 0.0}
+        values = [*self._values, float(self.ta.time)]
+        return {j for j in self._active[mode] if j != skip and self._guards[j](state, values)[0] == 0.0}
 
     def _write_pars(self, values: dict) -> None:
         pars = self.ta.pars
@@ -206,7 +209,7 @@ class HeyokaBackend(OrbitBackend):
         import heyoka as hy
 
         self._outside = None
-        self._before = self.signed_guards(self.ta.state, self.mode)
+        self._before = self.signed_guards(self.ta.state, self.mode, self.ta.time)
         out = self.ta.propagate_until(float(t_end), max_steps=int(max_steps), callback=self._after_step)
         outcome, steps = out[0], int(out[3])
         state = self.ta.state.copy()

@@ -21,7 +21,7 @@ from scipy.optimize import brentq
 
 from hybrid.errors import ParameterError
 
-from ._base import Advance, OrbitBackend
+from ._base import TIME, Advance, OrbitBackend
 from ._convert import to_callable
 
 METHODS = {"DOP853": DOP853, "RK45": RK45, "RK23": RK23, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
@@ -71,15 +71,18 @@ class ScipyBackend(OrbitBackend):
         super().__init__(automaton, params, rtol=rtol, atol=atol, dense=dense)
         self.method = method
         self.max_step = max_step
-        names = list(automaton.parameters)
-        self._values = [self.params[p] for p in names]
+        self._values = [self.params[p] for p in automaton.parameters]
+        # every compiled function takes the time as a last parameter (forcing, moving guards)
+        names = [*automaton.parameters, "t"]
         self._flows = {m.name: to_callable(m.flow, automaton.states, names) for m in automaton.modes}
         self._guards = [to_callable([t.guard], automaton.states, names) for t in automaton.transitions]
-        # d guard / dt along each mode's flow, to find a guard's extremum inside a step (grazing)
+        # d guard / dt along each mode's flow (plus its explicit time derivative), to find a guard's extremum
+        # inside a step (grazing)
         self._guard_rates = {
             m.name: {
                 j: to_callable(
-                    [sum(sp.diff(t.guard, s) * f for s, f in zip(automaton.states, m.flow))], automaton.states, names
+                    [sum(sp.diff(t.guard, s) * f for s, f in zip(automaton.states, m.flow)) + sp.diff(t.guard, TIME)],
+                    automaton.states, names,
                 )
                 for j, t in enumerate(automaton.transitions) if t.source == m.name
             }
@@ -103,8 +106,8 @@ class ScipyBackend(OrbitBackend):
         self._cooling = fired
         self.fresh = True
 
-    def _guard(self, j, y) -> float:
-        return self._guards[j](y, self._values)[0]
+    def _guard(self, j, y, t) -> float:
+        return self._guards[j](y, [*self._values, t])[0]
 
     def _crossed(self, j, g_old, g_new) -> bool:
         d = self._directions[j]
@@ -121,32 +124,32 @@ class ScipyBackend(OrbitBackend):
         rate = self._guard_rates[self.mode][j]
 
         def r(s):
-            return rate(sol(s), self._values)[0]
+            return rate(sol(s), [*self._values, s])[0]
 
         if not (r(t_lo) * r(t_hi) < 0.0):
             return None
         t_ext = brentq(r, t_lo, t_hi, xtol=4 * _EPS, rtol=4 * _EPS)
-        g_ext = self._guard(j, sol(t_ext))
+        g_ext = self._guard(j, sol(t_ext), t_ext)
         for a, b, g_a, g_b in ((t_lo, t_ext, g_lo, g_ext), (t_ext, t_hi, g_ext, g_hi)):
             if self._crossed(j, g_a, g_b):
                 if g_b == 0.0:
                     return b
-                return brentq(lambda s: self._guard(j, sol(s)), a, b, xtol=4 * _EPS, rtol=4 * _EPS)
+                return brentq(lambda s: self._guard(j, sol(s), s), a, b, xtol=4 * _EPS, rtol=4 * _EPS)
         return None
 
     def advance(self, t_end, max_steps=0):
         flow, values = self._flows[self.mode], self._values
 
         def fun(t, y):
-            return np.array(flow(y, values))
+            return np.array(flow(y, [*values, t]))
 
         active = self._active[self.mode]
         steps = 0
         if t_end <= self.t:
             return Advance(self.t, self.y.copy(), None, 0)
         solver = self.method(fun, self.t, self.y, t_end, rtol=self.rtol, atol=self.atol, max_step=self.max_step)
-        g_old = [self._guard(j, self.y) for j in active]
-        before = self.signed_guards(self.y, self.mode)
+        g_old = [self._guard(j, self.y, self.t) for j in active]
+        before = self.signed_guards(self.y, self.mode, self.t)
         # cooldown: the event location is exact only to rounding, so the guard that just fired may sit a hair on
         # its old side; crossings of it closer than `cool` to the restart are that rounding, not a new event
         cooling, t_start = getattr(self, "_cooling", None), self.t
@@ -162,7 +165,7 @@ class ScipyBackend(OrbitBackend):
                 return Advance(self.t, self.y.copy(), None, steps,
                                failed=f"scipy {self.method.__name__} failed at t={solver.t:.17g}: {message}")
             t_old, t_new = solver.t_old, solver.t
-            g_new = [self._guard(j, solver.y) for j in active]
+            g_new = [self._guard(j, solver.y, t_new) for j in active]
             hits = []
             sol = None
             for k, j in enumerate(active):
@@ -171,7 +174,7 @@ class ScipyBackend(OrbitBackend):
                     t_c = t_start + cool
                     if t_c >= t_new:
                         continue
-                    g_old[k] = self._guard(j, sol(t_c))
+                    g_old[k] = self._guard(j, sol(t_c), t_c)
                     t_lo = t_c
                 else:
                     t_lo = t_old
@@ -180,7 +183,7 @@ class ScipyBackend(OrbitBackend):
                     if g_new[k] == 0.0:
                         t_hit = t_new
                     else:
-                        t_hit = brentq(lambda s, j=j, sol=sol: self._guard(j, sol(s)), t_lo, t_new,
+                        t_hit = brentq(lambda s, j=j, sol=sol: self._guard(j, sol(s), s), t_lo, t_new,
                                        xtol=4 * _EPS, rtol=4 * _EPS)
                     hits.append((t_hit, self._priority[j], j))
                 else:

@@ -28,7 +28,7 @@ from hybrid.errors import ModelError
 
 from ._codegen import _Printer
 
-TEMPLATE_VERSION = "2"
+TEMPLATE_VERSION = "3"
 MAX_EVENTS = 64
 """Events handled within one time step; more are counted as ``event_overflow`` (chattering or Zeno)."""
 TIME = real_symbol("t")
@@ -357,8 +357,13 @@ def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf, scheme,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
-              v_scale, v_bins, vhist, counts, sums, sumsq, events, gstat):
+              v_scale, v_bins, vhist, counts, sums, sumsq, events, gstat, n_phase, phase_steps, phist, psums,
+              pcount):
     """Paths of one chunk; histograms (with underflow bin 0 and overflow bin last), sums and event counts.
+
+    Phase sections (``n_phase`` > 0): after every ``phase_steps``-th step (counted from t0, burn-in included) the
+    observables also go into ``phist[k]``, ``psums[k]`` and ``pcount[k]`` with k = (steps / phase_steps) mod
+    n_phase, so that section k holds the states at t0 + (k / n_phase + i) * period exactly.
 
     ``scheme``: 0 Euler-Maruyama, 1 Milstein (commutative noise), 2 splitting (kick, free flight, noise, kick).
     counts: [samples, event_overflow, outside, nonfinite, joint_outside]; events[j]: firings of transition j
@@ -472,6 +477,8 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                         counts[1] += 1
                     t += frac * dt
                     break
+            # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
+            t = t0 + (step + 1) * dt
             if free_flight:
                 noise(mode, x, t, p, G)
                 for i in range(N):
@@ -484,6 +491,22 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                     x[VEL[k]] += 0.5 * dt * f[VEL[k]]
             if not rec:
                 continue
+            if n_phase > 0 and (step + 1) % phase_steps == 0:
+                kp = ((step + 1) // phase_steps) % n_phase
+                pcount[kp] += 1
+                _observe(x, t, p, ob)
+                for o in range(N_OBS):
+                    v = ob[o]
+                    if v != v:
+                        continue
+                    psums[kp, o] += v
+                    b = (v - obs_lo[o]) * obs_scale[o]
+                    if b < 0.0:
+                        phist[kp, o, 0] += 1
+                    elif b >= obs_bins[o]:
+                        phist[kp, o, obs_bins[o] + 1] += 1
+                    else:
+                        phist[kp, o, int(b) + 1] += 1
             cs += 1
             if cs < stride:
                 continue

@@ -123,7 +123,14 @@ class AutomatonEnsemble:
     flags : dict
         Totals of ``COUNT_NAMES``.
     settings : dict
+        Includes ``dt`` (the step used) and, with phase sections, ``dt_requested``, ``phases``, ``period`` and
+        ``phase_steps`` (steps per phase interval).
     wall_time : float
+    phase_counts : dict name -> (phases, bins + 2) int array, or None
+        Poincaré sections: the histogram of each observable at the phases k / phases of the forcing period
+        (underflow first, overflow last), when ``phases`` was given.
+    phase_sums, phase_samples : (chunks, phases, observables) and (chunks, phases) arrays, or None
+        Per-chunk sums and sample counts at each phase (batch means).
     """
 
     names: tuple
@@ -140,6 +147,9 @@ class AutomatonEnsemble:
     settings: dict
     wall_time: float = 0.0
     sampled_time: float = field(default=0.0)
+    phase_counts: dict | None = None
+    phase_sums: np.ndarray | None = None
+    phase_samples: np.ndarray | None = None
 
     def mean(self, name: str) -> Estimate:
         """Time-and-ensemble mean of an observable with a 95 % batch-means interval over chunks.
@@ -164,6 +174,61 @@ class AutomatonEnsemble:
         c = self.counts[name]
         return float((c[0] + c[-1]) / max(self.flags["samples"], 1))
 
+    def _phase_index(self, k: int) -> int:
+        if self.phase_counts is None:
+            raise ParameterError("no phase sections were recorded: pass phases=N and period=T to simulate_automaton")
+        n = self.settings["phases"]
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < n:
+            raise ParameterError(f"phase index {k!r} must be an integer in [0, {n})")
+        return int(k)
+
+    def phase_times(self) -> np.ndarray:
+        """The section times k * period / phases, k = 0 .. phases - 1 (modulo the period)."""
+        n = self.settings["phases"]
+        return np.arange(n) * self.settings["period"] / n
+
+    def phase_mean(self, name: str, k: int) -> Estimate:
+        """Mean of an observable on Poincaré section ``k`` (t = k T / phases mod T), with a 95 % batch-means CI.
+
+        Examples
+        --------
+        >>> from models import ImpactOscillator
+        >>> m = ImpactOscillator("x", "c*y", forcing="A*cos(W*t)", parameters={"c": 0.5, "A": 0.4, "W": 1.3,
+        ...                      "D": 0.05}, barriers=None)
+        >>> ens = simulate_automaton(m.to_automaton(), "splitting", dt=0.01, paths=16, t_end=100.0, t_burn=20.0,
+        ...                          x0=(0, 0), seed=1, observables={"x": "x"}, histograms={"x": (-3, 3, 60)},
+        ...                          phases=4, period=m.forcing_period)          # doctest: +SKIP
+        >>> ens.phase_mean("x", 0)                        # doctest: +SKIP
+        """
+        k = self._phase_index(k)
+        o = self.names.index(name)
+        return ratio_estimate(self.phase_sums[:, k, o], self.phase_samples[:, k])
+
+    def phase_density(self, name: str, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(edges, density) of an observable on section ``k``, normalised by all samples of that section."""
+        k = self._phase_index(k)
+        c = self.phase_counts[name][k]
+        e = self.edges[name]
+        return e, c[1:-1] / max(int(c.sum()), 1) / np.diff(e)
+
+    def phase_to_pandas(self, name: str):
+        """Phase-resolved histogram of one observable, long form: phase, t_phase, lo, hi, count, density.
+
+        Each phase has an underflow row (lo = -inf) and an overflow row (hi = inf) with NaN density.
+        """
+        import pandas as pd
+
+        frames = []
+        for k, tk in enumerate(self.phase_times()):
+            e, d = self.phase_density(name, k)
+            c = self.phase_counts[name][k]
+            frames.append(pd.DataFrame({
+                "phase": k, "t_phase": tk, "lo": np.concatenate([[-np.inf], e[:-1], [e[-1]]]),
+                "hi": np.concatenate([[e[0]], e[1:], [np.inf]]), "count": c,
+                "density": np.concatenate([[np.nan], d, [np.nan]]),
+            }))
+        return pd.concat(frames, ignore_index=True)
+
     def rate(self, transition: str) -> float:
         """Firings of ``transition`` per unit time and path, after burn-in."""
         k = self.transitions.index(transition)
@@ -171,7 +236,8 @@ class AutomatonEnsemble:
 
     def merge(self, other: AutomatonEnsemble) -> AutomatonEnsemble:
         """The union of two ensembles of the same automaton, scheme, dt and histogram settings."""
-        keys = ("automaton", "scheme", "dt", "t_end", "t_burn", "stride", "histograms", "joint", "params")
+        keys = ("automaton", "scheme", "dt", "t_end", "t_burn", "stride", "histograms", "joint", "params", "phases",
+                "period")
         if any(self.settings.get(k) != other.settings.get(k) for k in keys):
             raise ParameterError("only ensembles of the same automaton, scheme, dt and histograms can be merged")
         joint = None
@@ -184,6 +250,10 @@ class AutomatonEnsemble:
             {k: self.flags[k] + other.flags[k] for k in self.flags}, dict(self.settings, paths=self.settings["paths"]
                                                                            + other.settings["paths"]),
             self.wall_time + other.wall_time, self.sampled_time + other.sampled_time,
+            None if self.phase_counts is None else {k: self.phase_counts[k] + other.phase_counts[k]
+                                                    for k in self.phase_counts},
+            None if self.phase_sums is None else np.concatenate([self.phase_sums, other.phase_sums]),
+            None if self.phase_samples is None else np.concatenate([self.phase_samples, other.phase_samples]),
         )
 
     def to_pandas(self, name: str):
@@ -232,7 +302,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                        observables: dict | None = None, histograms: dict | None = None, joint=None,
                        speed_range: tuple = (0.0, 10.0, 100), stride: int = 1, chunk_paths: int = 8,
                        threads: int | None = None, convention: str = "stratonovich",
-                       max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True) -> AutomatonEnsemble:
+                       max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True, phases: int = 0,
+                       period: float | None = None) -> AutomatonEnsemble:
     """Monte Carlo ensemble of a hybrid automaton with noise, crossings located inside the step.
 
     Parameters
@@ -276,6 +347,11 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Apply the step rule of :func:`guard_step_rule`: a pilot (a copy of chunk 0's stream, 2 % of the steps,
         at least 2000) refuses a ``dt`` with which one step moves a guard across half of the range that guard
         spans along the paths; the run itself warns above a tenth. ``settings['step_rule']`` keeps the figures.
+    phases, period : int, float
+        Poincaré sections of a periodically forced automaton: with ``phases=N`` the observables are also
+        histogrammed at the times k T / N + i T (k = 0 .. N - 1, after burn-in), besides the time average. So that
+        these times fall exactly on steps, dt is lowered to T / (N m) with the smallest integer m >= T / (N dt);
+        ``settings['dt']`` reports the step used and ``settings['dt_requested']`` the one asked for.
 
     Returns
     -------
@@ -307,6 +383,25 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     paths = _as_int("paths", paths)
     stride = _as_int("stride", stride)
     chunk_paths = _as_int("chunk_paths", chunk_paths)
+    dt_requested, phase_steps = dt, 1
+    if isinstance(phases, bool) or not isinstance(phases, (int, np.integer)) or phases < 0:
+        raise ParameterError(f"phases={phases!r} must be an integer >= 0 (0: no phase sections)")
+    phases = int(phases)
+    if phases:
+        if period is None:
+            raise ParameterError("phases=N needs the forcing period: pass period=T (for a forced ImpactOscillator, "
+                                 "model.forcing_period)")
+        period = _as_float("period", period)
+        if phases > 10**6:
+            raise ParameterError(f"phases={phases} is more than 1e6 sections; use fewer")
+        # the sections must fall on steps: T = phases * phase_steps * dt exactly, with dt no larger than asked
+        phase_steps = max(1, math.ceil(period / (phases * dt) * (1.0 - 1e-12)))
+        dt = period / (phases * phase_steps)
+        if t_end - t_burn < period:
+            raise ParameterError(f"t_end - t_burn = {t_end - t_burn:g} is shorter than one forcing period "
+                                 f"{period:g}: every phase section needs samples")
+    elif period is not None:
+        raise ParameterError("period=T without phases=N records nothing; give phases=N as well")
     n_burn = int(round(t_burn / dt))
     n_samp = int(round((t_end - t_burn) / dt)) // stride
     if n_samp < 1:
@@ -397,20 +492,26 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     sumsq = np.zeros((n_chunks, n_obs))
     events = np.zeros((n_chunks, max(n_tr, 1)), dtype=np.int64)
     dummy_joint = np.zeros((1, 1), dtype=np.int64)
+    n_ph = max(phases, 1)
+    phist = np.zeros((n_chunks, n_ph, n_obs, width), dtype=np.int64)
+    psums = np.zeros((n_chunks, n_ph, n_obs))
+    pcount = np.zeros((n_chunks, n_ph), dtype=np.int64)
     mode_index = mode_names.index(mode0)
 
     gstat = np.zeros((n_chunks, max(n_tr, 1), 4))
     gstat[:, :, 2], gstat[:, :, 3] = np.inf, -np.inf
 
     def call(rng_state, k, burn, samples, out):
-        hist_k, jhist_k, vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k = out
+        hist_k, jhist_k, vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k, phist_k, psums_k, pcount_k = out
         module.run_chunk(rng_state, npaths[k], burn, samples, stride, dt, 0.0, x0, mode_index, p, zx, zk, zf,
                          sch.code, obs_lo, obs_scale, obs_bins, hist_k, jx, jy, j_lo, j_scale, j_bins, jhist_k,
-                         v_scale, int(v_bins), vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k)
+                         v_scale, int(v_bins), vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k, phases,
+                         phase_steps, phist_k, psums_k, pcount_k)
 
     def run(k):
         call(states[k], k, n_burn, n_samp, (hist[k], jhist[k] if jhist is not None else dummy_joint, vhist[k],
-                                           counts[k], sums[k], sumsq[k], events[k], gstat[k]))
+                                           counts[k], sums[k], sumsq[k], events[k], gstat[k], phist[k], psums[k],
+                                           pcount[k]))
 
     step_rule = None
     if check_dt and n_tr:
@@ -420,7 +521,9 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         g_pilot = gstat[:1].copy()
         call(states[0].copy(), 0, pilot_steps, 0, (np.zeros_like(hist[0]), dummy_joint, np.zeros_like(vhist[0]),
                                                   np.zeros_like(counts[0]), np.zeros_like(sums[0]),
-                                                  np.zeros_like(sumsq[0]), np.zeros_like(events[0]), g_pilot[0]))
+                                                  np.zeros_like(sumsq[0]), np.zeros_like(events[0]), g_pilot[0],
+                                                  np.zeros_like(phist[0]), np.zeros_like(psums[0]),
+                                                  np.zeros_like(pcount[0])))
         step_rule = guard_step_rule(g_pilot[0], [t.name for t in st.transitions], dt, refuse=True, warn=False)
 
     workers = threads or os.cpu_count() or 1
@@ -447,13 +550,21 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 + repr([t.name for t in st.transitions]) + _auto_codegen.source_hash(src),
                 "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end, "t_burn": t_burn, "stride": stride,
                 "seed": seed, "chunk_paths": chunk_paths, "histograms": dict(histograms), "joint": joint,
-                "params": values, "convention": convention, "orders": sch.orders(st), "step_rule": step_rule}
+                "params": values, "convention": convention, "orders": sch.orders(st), "step_rule": step_rule,
+                "phases": phases, "period": period}
+    if phases:
+        settings.update(dt_requested=dt_requested, phase_steps=phase_steps)
     ens = AutomatonEnsemble(
         names, edges, cts, jres, tuple(t.name for t in st.transitions), events.sum(axis=0)[:n_tr],
         np.linspace(0.0, float(v_hi), int(v_bins) + 1), vhist.sum(axis=0)[:n_tr], sums[:, : len(names)],
         counts[:, 0].astype(float), flags, settings, time.perf_counter() - t0_wall,
         sampled_time=float(paths) * n_samp * stride * dt,
     )
+    if phases:
+        psum_all = phist.sum(axis=0)
+        ens.phase_counts = {nm: psum_all[:, i, : bins[i] + 2].copy() for i, nm in enumerate(names)}
+        ens.phase_sums = psums[:, :, : len(names)]
+        ens.phase_samples = pcount.astype(float)
     _warn(ens)
     return ens
 

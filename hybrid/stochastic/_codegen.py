@@ -498,6 +498,14 @@ def _law_code(law) -> tuple[str, tuple[float, ...], object | None]:
     return f"({_Printer({'standard': 'python3'}).doprint(expr)})", tuple(values), None
 
 
+def refuse_forced(model) -> None:
+    """The oscillator kernels have no time: a forced model must go through its automaton (one-line ModelError)."""
+    if getattr(model, "is_forced", False):
+        raise ModelError(f"model {model.name!r} is forced (F = {model.forcing}): the oscillator kernels have no time; "
+                         "run hybrid.stochastic.simulate_automaton(model.to_automaton(), ...) (phases=N for "
+                         "Poincaré sections) or vibro mc, which does so")
+
+
 def generate_source(model, scheme, cache: bool = True) -> tuple[str, tuple[float, ...], object | None]:
     """The kernel module source for ``model`` and ``scheme`` (a Scheme instance).
 
@@ -511,6 +519,7 @@ def generate_source(model, scheme, cache: bool = True) -> tuple[str, tuple[float
     >>> "def run_chunks" in src, law_values[0]
     (True, 0.4)
     """
+    refuse_forced(model)
     if model.potential_expr is None:
         raise ModelError(
             f"sympy cannot integrate g = {model.g} in closed form, and the Monte Carlo kernel needs the potential G(x) "

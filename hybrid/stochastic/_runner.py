@@ -663,6 +663,7 @@ def solve_ensemble(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm | No
 def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execution):
     """Validate all three groups before anything is compiled; the scheme and the run's settings record."""
     pb, model = problem, problem.model
+    _codegen.refuse_forced(model)
     sch = get_scheme(algorithm.scheme)
     x0 = _as_x0(pb.x0)
     settings = _settings(model, sch, algorithm.dt, ex.paths, pb.t_end, pb.t_burn, ex.seed, pb.h_max, pb.bins,

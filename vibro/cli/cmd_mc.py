@@ -3,6 +3,10 @@
     vibro mc --model duffing --param delta=1.0 --restitution ma:vc=0.4 --scheme milstein --dt 1e-3 --paths 256 \\
              --t-end 2200 --t-burn 200 --seed 1 --h-max 4 --bins 400 --out h.csv [--joint joint.csv] \\
              [--checkpoint DIR] [--resume] [--scheduler dask[=ADDRESS]|cuda] [--precision f64|f32]
+
+A forced model (``ImpactOscillator(..., forcing="A*cos(Omega*t)")``) runs through its automaton
+(``hybrid.stochastic.simulate_automaton``); ``--phases N`` then also writes the histograms of H, x and y at N phases
+of the forcing period (one long CSV with a ``phase`` column, ``--phases-out``).
 """
 
 from __future__ import annotations
@@ -61,6 +65,12 @@ def register(subparsers) -> None:
     p.add_argument("--summary-json", default=None, help="also write the summary as JSON (not written if absent)")
     p.add_argument("--max-path-steps", type=float, default=1e13, help="refuse runs of more paths x steps")
     p.add_argument("--max-memory-gb", type=float, default=4.0, help="refuse histograms needing more memory")
+    p.add_argument("--phases", type=int, default=0, metavar="N",
+                   help="forced models: also histogram H, x and y at N phases of the forcing period (Poincaré "
+                        "sections); dt is lowered so that the period is a whole number of steps per phase")
+    p.add_argument("--phases-out", default=None, metavar="FILE",
+                   help="CSV of the phase-resolved histograms (observable,phase,t_phase,lo,hi,count,density; "
+                        "default: OUT with _phases before the suffix)")
     p.set_defaults(func=run)
 
 
@@ -81,6 +91,8 @@ def run(args) -> int:
         raise ParameterError("--resume needs --checkpoint DIR")
     model = model_from_args(args)
     started = time.perf_counter()
+    if getattr(model, "is_forced", False) or args.phases:
+        return _run_forced(args, model, started)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")
@@ -125,4 +137,117 @@ def run(args) -> int:
         print(f"  WARNING: {stats.violations} steps ended outside the barriers", file=sys.stderr)
         return 1
     print(f"  wrote {args.out}" + (f" and {args.joint}" if args.joint else ""))
+    return 0
+
+
+def _phases_path(args):
+    from pathlib import Path
+
+    if args.phases_out:
+        return Path(args.phases_out)
+    out = Path(args.out)
+    return out.with_name(f"{out.stem}_phases{out.suffix or '.csv'}")
+
+
+def _run_forced(args, model, started) -> int:
+    """A forced model: Monte Carlo of its automaton (simulate_automaton), time-averaged and phase-resolved."""
+    import math
+
+    import numpy as np
+    import pandas as pd
+
+    from hybrid.errors import ModelError
+    from hybrid.stochastic import AUTOMATON_SCHEMES, atomic_write_text, default_chunk_paths, simulate_automaton
+    from vibro.provenance import record, write_sidecar
+
+    period = model.forcing_period
+    if args.phases:
+        if args.phases < 0:
+            raise ParameterError(f"--phases {args.phases}: give a number of phases >= 1")
+        if period is None:
+            raise ParameterError(f"--phases needs a model with a periodic forcing (model {model.name!r} has "
+                                 f"{'none' if not model.is_forced else 'F = ' + str(model.forcing)}); declare "
+                                 "forcing='A*cos(Omega*t)'")
+        target = _phases_path(args)
+        if not target.resolve().parent.is_dir() or target.is_dir():
+            raise ParameterError(f"--phases-out {str(target)!r}: the directory does not exist or it is a directory")
+    if args.scheme not in AUTOMATON_SCHEMES:
+        raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
+                             f"{sorted(AUTOMATON_SCHEMES)}")
+    for flag, value in (("--checkpoint", args.checkpoint), ("--scheduler", args.scheduler if args.scheduler
+                                                                    not in (None, "threads") else None)):
+        if value is not None:
+            raise ParameterError(f"{flag} is not available for a forced model (its automaton runs on local "
+                                 "threads, without checkpoints); drop it")
+    if model.energy_expr is None:
+        raise ModelError("the Monte Carlo of a forced model needs G(x) in closed form for H; sympy cannot "
+                         f"integrate g = {model.g}")
+    if not (math.isfinite(args.h_max) and args.h_max > 0):
+        raise ParameterError(f"--h-max {args.h_max!r} must be a finite energy > 0")
+    automaton = model.to_automaton()
+    lo, hi = model.barriers
+    x_span = math.sqrt(2.0 * args.h_max) * 2.0
+    x_lo = lo if math.isfinite(lo) else -x_span
+    x_hi = hi if math.isfinite(hi) else x_span
+    y_hi = math.sqrt(2.0 * args.h_max)
+    nx, ny = args.xy_bins
+    histograms = {"H": (0.0, args.h_max, args.bins), "x": (x_lo, x_hi, nx), "y": (-y_hi, y_hi, ny)}
+    joint = ("x", "y", (x_lo, x_hi, nx), (-y_hi, y_hi, ny)) if args.joint else None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ens = simulate_automaton(
+            automaton, args.scheme, dt=args.dt, paths=args.paths, t_end=args.t_end, t_burn=args.t_burn,
+            x0=(0.0, 0.0), seed=args.seed, observables={"H": model.energy_expr, "x": "x", "y": "y"},
+            histograms=histograms, joint=joint, stride=args.stride,
+            chunk_paths=args.chunk_paths or default_chunk_paths(args.paths), max_path_steps=args.max_path_steps,
+            phases=args.phases, period=period if args.phases else None,
+        )
+    for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
+        print(f"vibro mc: warning: {text}", file=sys.stderr)
+    frame = ens.to_pandas("H").rename(columns={"lo": "H_lo", "hi": "H_hi"})
+    atomic_write_text(args.out, frame.to_csv(index=False, float_format="%.17g"))
+    written = [args.out]
+    if args.joint:
+        xn, yn, xe, ye, counts = ens.joint
+        iy, ix = np.indices(counts.shape)
+        cell = np.diff(xe)[ix.ravel()] * np.diff(ye)[iy.ravel()]
+        total = max(ens.flags["samples"], 1)
+        jf = pd.DataFrame({"x_lo": xe[ix.ravel()], "x_hi": xe[ix.ravel() + 1], "y_lo": ye[iy.ravel()],
+                           "y_hi": ye[iy.ravel() + 1], "count": counts.ravel(),
+                           "density": counts.ravel() / total / cell})
+        atomic_write_text(args.joint, jf.to_csv(index=False, float_format="%.17g"))
+        written.append(args.joint)
+    if args.phases:
+        long = pd.concat([ens.phase_to_pandas(nm).assign(observable=nm) for nm in ens.names], ignore_index=True)
+        long = long[["observable", "phase", "t_phase", "lo", "hi", "count", "density"]]
+        atomic_write_text(_phases_path(args), long.to_csv(index=False, float_format="%.17g"))
+        written.append(str(_phases_path(args)))
+    H = ens.mean("H")
+    rates = {tr: ens.rate(tr) for tr in ens.transitions}
+    results = {**ens.summary(), "mean_energy": {"value": H.value, "ci": H.ci},
+               "impact_rate": sum(rates.values()), "engine": "automaton"}
+    if args.phases:
+        results["phase_mean_x"] = [{"t_phase": float(tk), "value": ens.phase_mean("x", k).value,
+                                    "ci": ens.phase_mean("x", k).ci} for k, tk in enumerate(ens.phase_times())]
+    settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "engine": "simulate_automaton",
+                "forcing": str(model.forcing), "scheduler": "threads",
+                "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
+    rec = record("mc", model=model, settings=settings, results=results, started=started)
+    write_sidecar(args.out, rec)
+    if args.summary_json:
+        atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
+    steps = ens.settings["paths"] * ens.settings["t_end"] / ens.settings["dt"]
+    dt_note = (f" (lowered from {ens.settings['dt_requested']:g} so that T = {args.phases} x "
+               f"{ens.settings['phase_steps']} steps)" if args.phases else "")
+    print(f"vibro mc: {args.scheme} dt={ens.settings['dt']:.10g}{dt_note} paths={args.paths} seed={args.seed} "
+          f"path-steps={steps:.4g}  (forced model: automaton kernel)")
+    print(f"  forcing         F = {model.forcing}" + (f", period {period:.10g}" if period else ""))
+    print(f"  throughput      {steps / max(ens.wall_time, 1e-9) / 1e6:.1f} M path-steps/s  (wall "
+          f"{ens.wall_time:.2f} s)")
+    print(f"  E[H]            {H.value:.6g} ± {H.ci:.2g}   (± = 95% batch-means CI)")
+    print(f"  impacts/time    {sum(rates.values()):.6g}   ({int(ens.events.sum())} impacts)")
+    if ens.flags["outside"]:
+        print(f"  WARNING: {ens.flags['outside']} samples lay outside the barriers", file=sys.stderr)
+        return 1
+    print("  wrote " + ", ".join(str(w) for w in written))
     return 0

@@ -111,7 +111,8 @@ def barrier_geometry(model) -> str:
 
 
 def _check_averagable(model) -> None:
-    """The energy-envelope methods need one confining single well (any walls)."""
+    """The energy-envelope methods need an autonomous model and one confining single well (any walls)."""
+    model.require_autonomous()
     model.check_single_well()
 
 

@@ -1,0 +1,134 @@
+"""Harmonic plus random forcing: time-averaged and phase-resolved (Poincaré-section) densities by Monte Carlo.
+
+    x'' + c x' + a x + b x^3 = A cos(Omega t) + sqrt(2 D) xi(t),   |x| < delta,   Newton impacts v+ = -r v-
+
+A periodically forced system has periodic statistics: besides the time average, ``simulate_automaton(...,
+phases=N, period=T)`` histograms the state at the N phases k T / N of the forcing (dt is lowered so that the
+sections fall exactly on steps). Averaging does not apply to a forced model (it refuses it); this script checks
+the Monte Carlo against two independent references instead:
+
+1. A linear oscillator without barriers (closed form): on every section the density is Gaussian with mean = the
+   periodic response A Re(exp(i Omega t) / (w0^2 - Omega^2 + i c Omega)) and variance = the unforced stationary
+   variance D / (c w0^2).
+2. The Duffing impact oscillator as D -> 0: the section means tend to the deterministic period-1 impacting orbit,
+   computed with heyoka (``simulate_orbit``) from its Poincaré section.
+
+Then it reports the densities at D = 0.02 and checks that the mean over the sections of E[H | phase] equals the
+time average E[H] (a Riemann sum of a periodic mean that the noise makes smooth).
+
+Run:  python examples/08_harmonic_random.py [--quick]   (headless; exits 1 if a check fails)
+"""
+
+import math
+import sys
+
+import numpy as np
+
+from hybrid.deterministic import simulate_orbit
+from hybrid.stochastic import simulate_automaton
+from models import ForcedDuffingImpact, ImpactOscillator, Newton
+
+
+def linear(c=0.5, w0=1.0, W=1.3, A=0.4, D=0.05):
+    # the whole declaration: a linear spring, linear damping, harmonic forcing, white noise, no barriers
+    return ImpactOscillator("w0**2*x", "c*y", forcing="A*cos(W*t)",
+                            parameters={"c": c, "w0": w0, "W": W, "A": A, "D": D}, barriers=None)
+
+
+def duffing(D):
+    return ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=D)
+
+
+def check_linear(quick: bool, N: int = 8) -> bool:
+    c, w0, W, A, D = 0.5, 1.0, 1.3, 0.4, 0.05
+    m = linear(c, w0, W, A, D)
+    z = A / (w0**2 - W**2 + 1j * c * W)
+    ens = simulate_automaton(m.to_automaton(), "splitting", dt=0.01, paths=64, t_end=250.0 if quick else 800.0,
+                             t_burn=40.0, x0=(0.0, 0.0), seed=11, observables={"x": "x", "x2": "x**2"},
+                             histograms={"x": (-3.0, 3.0, 60), "x2": (0.0, 4.0, 40)}, phases=N,
+                             period=m.forcing_period, chunk_paths=4)
+    var = D / (c * w0**2)
+    print(f"1. linear, no barriers: dt {ens.settings['dt']:.6g} (asked 0.01), {ens.settings['phase_steps']} steps "
+          f"per phase, variance D/(c w0^2) = {var:.4g}")
+    print("   phase   t      E[x] MC             closed form   Var[x] MC          ")
+    misses = 0
+    for k, tk in enumerate(ens.phase_times()):
+        mean, second = ens.phase_mean("x", k), ens.phase_mean("x2", k)
+        exact = (z * np.exp(1j * W * tk)).real
+        v = second.value - mean.value**2
+        v_ci = second.ci + 2 * abs(mean.value) * mean.ci  # propagated half-width of E[x^2] - E[x]^2
+        miss = (not mean.covers(exact)) + (abs(v - var) > v_ci)
+        misses += miss
+        print(f"   {k:5d} {tk:6.3f}  {mean:.4f}   {exact:+.4f}       {v:.4f} ± {v_ci:.4f}" + ("  *" if miss else ""))
+    ok = misses <= 3  # 2N intervals at 95 %: more than 3 misses has a chance below 1 %
+    print(f"   {misses} of {2 * N} intervals miss the closed form: {'ok' if ok else 'FAILED'}")
+    return ok
+
+
+def deterministic_sections(m, N: int):
+    """x and H at the phases k T / N on the attracting orbit (heyoka, after 150 periods of transient)."""
+    T = m.forcing_period
+    state = simulate_orbit(m.with_params(D=0.0), (0.0, 0.0), t_end=150 * T).state
+    xs, hs, n_imp = [], [], 0
+    t0 = 150 * T
+    for k in range(N):
+        r = simulate_orbit(m.with_params(D=0.0), state, t0=t0, t_end=t0 + k * T / N) if k else None
+        s = state if r is None else r.state
+        xs.append(s[0])
+        hs.append(float(m.energy(s[0], s[1])))
+    one = simulate_orbit(m.with_params(D=0.0), state, t0=t0, t_end=t0 + T)
+    n_imp = one.n_impacts
+    assert np.allclose(one.state, state, atol=1e-8), "the attractor is not period-1"
+    return np.array(xs), np.array(hs), n_imp
+
+
+def check_duffing(quick: bool, N: int = 16) -> bool:
+    x_det, h_det, n_imp = deterministic_sections(duffing(0.0), N)
+    print(f"2. Duffing impact oscillator, A = 0.5, Omega = 1.2, r = 0.8: a period-1 orbit with {n_imp} impacts per "
+          "period (heyoka)")
+    ok = True
+    for D in (1e-4, 0.02):
+        m = duffing(D)
+        T = m.forcing_period  # a whole number of periods after burn-in: rates per period are not cut
+        ens = simulate_automaton(m.to_automaton(), "splitting", dt=0.005, paths=64,
+                                 t_end=(30 + (48 if quick else 190)) * T, t_burn=30 * T, x0=(0.0, 0.0), seed=5,
+                                 observables={"H": m.energy_expr, "x": "x"},
+                                 histograms={"H": (0.0, 4.0, 200), "x": (-1.0, 1.0, 80)}, phases=N,
+                                 period=m.forcing_period, chunk_paths=4)
+        H = ens.mean("H")
+        h_phase = np.array([ens.phase_mean("H", k).value for k in range(N)])
+        means = [ens.phase_mean("x", k) for k in range(N)]
+        dev = np.array([abs(e.value - xd) for e, xd in zip(means, x_det)])
+        rate = sum(ens.rate(tr) for tr in ens.transitions) * m.forcing_period
+        print(f"   D = {D:g}: E[H] = {H}, mean of E[H | phase] over the {N} sections = {h_phase.mean():.4f}, "
+              f"impacts per period {rate:.3f}")
+        if D <= 1e-4:
+            # D -> 0: within O(D / c) of the deterministic orbit (the spread is sqrt(D / c) ~ 0.03)
+            worst = float(dev.max())
+            worst_h = float(np.max(np.abs(h_phase - h_det)))
+            print(f"   max |E[x | phase] - x_orbit(phase)| = {worst:.2e}, max |E[H | phase] - H_orbit(phase)| = "
+                  f"{worst_h:.2e}; impacts per period {rate:.3f} vs {n_imp}")
+            ok &= worst < 0.02 and worst_h < 0.02 and abs(rate - n_imp) < 0.01
+        else:
+            # with noise E[H | t] is smooth in t, and the sections tile the period: their mean is a Riemann sum of
+            # it, equal to the time average E[H] (sampled every step) within the statistical error
+            ok &= abs(h_phase.mean() - H.value) < 3 * H.ci
+            e, dens = ens.density("H")
+            mode = 0.5 * (e[np.argmax(dens)] + e[np.argmax(dens) + 1])
+            spread = [math.sqrt(max(ens.phase_mean("H", k).value, 0.0)) for k in (0, N // 4, N // 2)]
+            print(f"   time-averaged p(H): mode at H = {mode:.3f}; section means of x at phases 0, 1/4, 1/2: "
+                  + ", ".join(f"{means[k].value:+.3f} (orbit {x_det[k]:+.3f})" for k in (0, N // 4, N // 2))
+                  + f"; sqrt E[H | phase] {', '.join(f'{s:.3f}' for s in spread)}")
+    print(f"   Duffing checks: {'ok' if ok else 'FAILED'}")
+    return ok
+
+
+def main(quick: bool) -> int:
+    ok = check_linear(quick)
+    ok &= check_duffing(quick)
+    print("OK" if ok else "FAILED")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main("--quick" in sys.argv))
