@@ -15,6 +15,9 @@ import warnings
 
 from hybrid.errors import ParameterError
 from vibro.cli.common import add_model_arguments, model_from_args
+from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
+from vibro.cli.mc_automaton import automaton_from_args
+from vibro.cli.mc_automaton import run as run_automaton
 from vibro.cli.names import SCHEMES
 
 
@@ -61,6 +64,7 @@ def register(subparsers) -> None:
     p.add_argument("--summary-json", default=None, help="also write the summary as JSON (not written if absent)")
     p.add_argument("--max-path-steps", type=float, default=1e13, help="refuse runs of more paths x steps")
     p.add_argument("--max-memory-gb", type=float, default=4.0, help="refuse histograms needing more memory")
+    add_automaton_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -79,6 +83,9 @@ def run(args) -> int:
             raise ParameterError(f"--{name.replace('_', '-')} {target!r} is a directory; give a file name")
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
+    resolved = automaton_from_args(args)  # None: an oscillator model without automaton options
+    if resolved is not None:
+        return run_automaton(args, resolved)
     model = model_from_args(args)
     started = time.perf_counter()
     progress = sys.stderr.isatty() if args.progress is None else args.progress
