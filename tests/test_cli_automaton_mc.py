@@ -156,3 +156,10 @@ def test_bad_automaton_requests_exit_2_with_one_line(argv, words, tmp, capsys):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in err, err
     assert not (tmp / "h.csv").exists()
+
+
+def test_filter_names_match_the_registry():
+    from models.excitation import FILTER_KINDS
+    from vibro.cli.mc_automaton import FILTERS
+
+    assert FILTERS == FILTER_KINDS
