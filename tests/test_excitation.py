@@ -152,6 +152,59 @@ def test_impact_oscillator_tends_to_the_white_noise_gibbs_density_as_the_bandwid
     assert abs(e_inf - gibbs) <= 3 * math.sqrt(cov[0, 0]), (e_inf, math.sqrt(cov[0, 0]), gibbs, means)
 
 
+@pytest.mark.slow
+def test_impact_oscillator_with_band_pass_noise_tends_to_the_white_noise_gibbs_mean():
+    # as for OU noise, the deficit is first order in the bandwidth b = 2 zeta omega_f (b * gap about -0.4)
+    c, d, delta = 0.5, 0.25, 0.6
+    model = ImpactOscillator("x", "c*y", parameters={"c": c, "D": d, "delta": delta}, restitution=Elastic())
+    gibbs, _ = gibbs_linear_between_walls(c, d, delta, np.array([0.0, 1.0]))
+    A = bandpass_filter(model, zeta=1.0, omega_f=1.0)
+    zetas, means, sigmas = [8.0, 16.0, 32.0], [], []
+    for zeta in zetas:
+        est = simulate_automaton(A, "splitting", dt=0.005, paths=128, t_end=3000.0, t_burn=20.0, x0=(0, 0, 0, 0),
+                                 seed=9, chunk_paths=8, params={"zeta": zeta}, histograms={"H": (0.0, 4.0, 40)}
+                                 ).mean("H")
+        means.append(est.value)
+        sigmas.append(est.ci / 1.96)
+    X = np.column_stack([np.ones(3), 1.0 / (2 * np.array(zetas))])
+    w = 1.0 / np.array(sigmas) ** 2
+    cov = np.linalg.inv(X.T @ (w[:, None] * X))
+    e_inf, slope = cov @ X.T @ (w * np.array(means))
+    assert slope < -3 * math.sqrt(cov[1, 1]), (slope, cov, means)
+    assert abs(e_inf - gibbs) <= 3 * math.sqrt(cov[0, 0]), (e_inf, math.sqrt(cov[0, 0]), gibbs, means)
+
+
+def test_each_noise_of_a_two_mass_model_gets_its_own_filter():
+    # the impact pair with a clearance it never reaches: a linear 4-state system whose two standard white noises
+    # (gains sqrt(2 c_i theta) / m_i) become two OU outputs z1, z2 (L = I: Var z_i = alpha / 2)
+    alpha, dt = 2.0, 0.01
+    A = ou_filter(impact_pair(gap=1e6), alpha=alpha)
+    p = dict(A.parameters)
+    k1, k2, m1, m2, c1, c2, th = (p[k] for k in ("k1", "k2", "m1", "m2", "c1", "c2", "theta"))
+    g1, g2 = math.sqrt(2 * c1 * th) / m1, math.sqrt(2 * c2 * th) / m2
+    # states x1, x2, v1, v2, z1, z2 (the filters' integrals drive nothing and are left out)
+    M = np.zeros((6, 6))
+    M[0, 2] = M[1, 3] = 1
+    M[2, :] = [-k1 / m1, 0, -c1 / m1, 0, g1, 0]
+    M[3, :] = [0, -k2 / m2, 0, -c2 / m2, 0, g2]
+    M[4, 4] = M[5, 5] = -alpha
+    B = np.zeros((6, 2))
+    B[4, 0] = B[5, 1] = alpha
+    exact = linalg.solve_continuous_lyapunov(M, -B @ B.T)
+    # the splitting scheme's one-step map: half kick of v1, v2, z1, z2, free flight of x1, x2, noise, half kick
+    K = np.eye(6) + 0.5 * dt * np.diag([0, 0, 1, 1, 1, 1]) @ M
+    F = np.eye(6) + dt * np.diag([1, 1, 0, 0, 0, 0]) @ M
+    chain = linalg.solve_discrete_lyapunov(K @ F @ K, K @ B @ B.T @ K.T * dt)
+    obs = {"x1s": "x1**2", "x2s": "x2**2", "z1s": "z1**2", "z2s": "z2**2"}
+    ens = simulate_automaton(A, "splitting", dt=dt, paths=64, t_end=1500.0, t_burn=30.0, x0=(0,) * 8, seed=13,
+                             chunk_paths=4, observables=obs, histograms={k: (0, 1e3, 1) for k in obs})
+    for name, i in (("x1s", 0), ("x2s", 1), ("z1s", 4), ("z2s", 5)):
+        est, bias = ens.mean(name), abs(chain[i, i] - exact[i, i])
+        assert bias < 0.02 * exact[i, i], (name, chain[i, i], exact[i, i])
+        assert abs(est.value - exact[i, i]) <= 3 * est.ci + bias, (name, est, exact[i, i], bias)
+    assert exact[4, 4] == pytest.approx(alpha / 2) and exact[0, 0] < th / k1  # coloured: below the Gibbs th/k1
+
+
 def test_filters_extend_states_parameters_and_resets():
     A = ou_filter(DuffingImpact(), alpha=4.0)
     assert [s.name for s in A.states] == ["x", "y", "z_int", "z"]
