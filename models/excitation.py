@@ -197,10 +197,7 @@ def _base_of(model) -> _Base:
 
 
 def _extend_reset(reset, n_new: int):
-    """The transition's reset on the longer state: the filter states pass through an impact unchanged."""
-    if not callable(reset):
-        return None  # symbolic resets are extended by the caller, who knows the new symbols
-
+    """A callable reset on the longer state: the filter states pass through an impact unchanged."""
     def extended(state, params, _reset=reset, _n=n_new):
         state = np.asarray(state, dtype=float)
         out = np.array(state, dtype=float)
@@ -213,7 +210,7 @@ def _extend_reset(reset, n_new: int):
 def _build(model, kind: str, values: dict, names: dict, b_expr, w2_expr, state: str) -> FilteredAutomaton:
     base = _base_of(model)
     taken = {s.name for s in base.states} | set(base.parameters) | {"t"}
-    clash = sorted((set(values) | {names.get(k, k) for k in values}) & taken)
+    clash = sorted({names.get(k, k) for k in values} & taken)
     if clash:
         raise ModelError(f"the filter's parameter names {clash} are already used by the model; rename them, e.g. "
                          f"{kind}_filter(model, ..., names={{'{clash[0]}': '{clash[0]}_f'}})")
@@ -266,7 +263,7 @@ def ou_filter(model, alpha: float = 1.0, *, state: str = "z", names: Mapping[str
     Parameters
     ----------
     model : ImpactOscillator or HybridAutomaton
-        The white-noise model. Its noises must not depend on time through a mode switch of noise width.
+        The white-noise model (every mode with the same number of noises).
     alpha : float
         Bandwidth (inverse correlation time) > 0; the default of the automaton parameter ``alpha``.
     state : str

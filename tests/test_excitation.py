@@ -217,6 +217,16 @@ def test_filters_extend_states_parameters_and_resets():
     assert B.resolve_parameters({"zeta": 0.5})["zeta"] == 0.5
     renamed = ou_filter(linear(), alpha=2.0, state="u", names={"alpha": "a_f"})
     assert "a_f" in renamed.parameters and renamed.states[-1].name == "u"
+    # correlated noises: the filters are driven by L dW with L L^T = 2 D (and a model parameter alpha is no clash
+    # once the filter's is renamed)
+    corr = ImpactOscillator("x", "c*y", noise=(1, "x"), intensity=[["D", "rho"], ["rho", "D"]],
+                            parameters={"c": 0.1, "D": 0.1, "rho": 0.05, "alpha": 3.0}, barriers=None)
+    C2 = ou_filter(corr, alpha=2.0, names={"alpha": "a_f"})
+    a_f = sp.Symbol("a_f", real=True)
+    L = sp.Matrix([C2.modes[0].noise[3], C2.modes[0].noise[5]]) / a_f
+    assert sp.simplify(L * L.T - 2 * corr.intensity) == sp.zeros(2, 2)
+    assert C2.modes[0].flow[1] == sp.sympify(corr.to_automaton().modes[0].flow[1]) + C2.states[3] + \
+        C2.states[0] * C2.states[5]
 
 
 @pytest.mark.parametrize("call, error", [
