@@ -201,6 +201,12 @@ def run(args, resolved) -> int:
     if len(x0) != n:
         raise ParameterError(f"--x0 gives {len(x0)} values for the {n} states {[s.name for s in automaton.states]}")
     chunk = args.chunk_paths or max(1, min(8, args.paths // 8))
+    if isinstance(chunk, int) and chunk >= 1 and args.paths >= 1:  # bad values: simulate_automaton says why
+        cells = -(-args.paths // chunk) * len(obs) * (max(b for _, _, b in hist.values()) + 2)
+        if cells * 8 > args.max_memory_gb * 1e9:  # one int64 histogram row per chunk and observable
+            raise ParameterError(f"the histograms need {cells * 8 / 2**30:.3g} GiB ({cells:.3g} counters over the "
+                                 f"chunks), above --max-memory-gb {args.max_memory_gb:g}; use fewer bins or larger "
+                                 "--chunk-paths")
     started = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")
