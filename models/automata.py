@@ -70,4 +70,37 @@ def vibrating_table(**parameters: float) -> HybridAutomaton:
     )
 
 
-__all__ = ["impact_pair", "vibrating_table"]
+def describe_automaton(automaton: HybridAutomaton) -> dict:
+    """A JSON-friendly description of an automaton: states, parameters, modes, transitions, observables.
+
+    Expressions are printed as text; a callable reset is named ``<callable>``. The command line stores it in the
+    provenance sidecar of ``vibro mc`` for automaton models.
+
+    Examples
+    --------
+    >>> d = describe_automaton(impact_pair())
+    >>> d["states"], [t["name"] for t in d["transitions"]]
+    (['x1', 'x2', 'v1', 'v2'], ['hit_right', 'hit_left'])
+    """
+    def text(e):
+        return [text(v) for v in e] if isinstance(e, (tuple, list)) else str(e)
+
+    return {
+        "model": "automaton",
+        "states": [s.name for s in automaton.states],
+        "parameters": dict(automaton.parameters),
+        "modes": [{"name": m.name, "flow": text(m.flow), "noise": None if m.noise is None else text(m.noise)}
+                  for m in automaton.modes],
+        "transitions": [{"name": t.name, "source": t.source, "target": t.target, "guard": str(t.guard),
+                         "direction": t.direction, "priority": t.priority,
+                         "reset": text(t.reset) if t.symbolic_reset else "<callable>"}
+                        for t in automaton.transitions],
+        "initial_mode": automaton.initial_mode,
+        "observables": {k: str(v) for k, v in automaton.observables.items()},
+    }
+
+
+AUTOMATA = {"impact_pair": impact_pair, "vibrating_table": vibrating_table}
+"""Built-in automaton models by name (``vibro mc --model impact_pair``): functions of keyword parameters."""
+
+__all__ = ["AUTOMATA", "describe_automaton", "impact_pair", "vibrating_table"]

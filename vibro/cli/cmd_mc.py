@@ -19,6 +19,9 @@ import warnings
 
 from hybrid.errors import ParameterError
 from vibro.cli.common import add_model_arguments, model_from_args
+from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
+from vibro.cli.mc_automaton import automaton_from_args
+from vibro.cli.mc_automaton import run as run_automaton
 from vibro.cli.names import SCHEMES
 
 
@@ -71,6 +74,7 @@ def register(subparsers) -> None:
     p.add_argument("--phases-out", default=None, metavar="FILE",
                    help="CSV of the phase-resolved histograms (observable,phase,t_phase,lo,hi,count,density; "
                         "default: OUT with _phases before the suffix)")
+    add_automaton_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -89,6 +93,9 @@ def run(args) -> int:
             raise ParameterError(f"--{name.replace('_', '-')} {target!r} is a directory; give a file name")
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
+    resolved = automaton_from_args(args)  # None: an oscillator model without automaton options
+    if resolved is not None:
+        return run_automaton(args, resolved)
     model = model_from_args(args)
     started = time.perf_counter()
     if getattr(model, "is_forced", False) or args.phases:

@@ -45,6 +45,32 @@ def parse_params(items: list[str]) -> dict[str, float]:
     return out
 
 
+def _user_attribute(spec: str, what: str):
+    """``NAME`` from ``path/to/file.py:NAME`` (the file run once per process), with one-line errors."""
+    import importlib.util
+    from pathlib import Path
+
+    path, colon, name = spec.rpartition(":")
+    if not colon or not path.endswith(".py"):
+        raise ParameterError(f"unknown model {spec!r}; use {what} or path/to/file.py:NAME")
+    if not Path(path).is_file():
+        raise ParameterError(f"model file {path!r} does not exist")
+    key = str(Path(path).resolve())
+    module = _USER_MODULES.get(key)
+    if module is None:
+        module_spec = importlib.util.spec_from_file_location(f"vibro_user_model_{Path(path).stem}", path)
+        module = importlib.util.module_from_spec(module_spec)
+        try:
+            module_spec.loader.exec_module(module)
+        except Exception as exc:  # the user's file: report, do not trace back
+            raise ParameterError(f"could not import {path!r}: {type(exc).__name__}: {exc}") from exc
+        _USER_MODULES[key] = module
+    return path, name, getattr(module, name, None)
+
+
+_USER_MODULES: dict = {}
+
+
 def load_model_class(spec: str):
     """The model class for ``spec``: a registered name, or ``path/to/file.py:ClassName``.
 
@@ -53,28 +79,65 @@ def load_model_class(spec: str):
     >>> load_model_class("duffing").__name__
     'DuffingImpact'
     """
-    import importlib.util
-    from pathlib import Path
-
     from models import MODELS, ImpactOscillator
 
     if spec in MODELS:
         return MODELS[spec]
-    path, colon, cls_name = spec.rpartition(":")
-    if not colon or not path.endswith(".py"):
-        raise ParameterError(f"unknown model {spec!r}; use one of {sorted(MODELS)} or path/to/file.py:ClassName")
-    if not Path(path).is_file():
-        raise ParameterError(f"model file {path!r} does not exist")
-    module_spec = importlib.util.spec_from_file_location(f"vibro_user_model_{Path(path).stem}", path)
-    module = importlib.util.module_from_spec(module_spec)
-    try:
-        module_spec.loader.exec_module(module)
-    except Exception as exc:  # the user's file: report, do not trace back
-        raise ParameterError(f"could not import {path!r}: {type(exc).__name__}: {exc}") from exc
-    cls = getattr(module, cls_name, None)
+    path, cls_name, cls = _user_attribute(spec, f"one of {sorted(MODELS)}")
     if not (isinstance(cls, type) and issubclass(cls, ImpactOscillator)):
         raise ParameterError(f"{path!r} has no ImpactOscillator subclass named {cls_name!r}")
     return cls
+
+
+def load_model_object(spec: str):
+    """What ``--model`` names, for commands that also run automata (``vibro mc``).
+
+    Returns an ``ImpactOscillator`` subclass (built-in name or a class in a file), or a ``HybridAutomaton``: a
+    built-in automaton (``impact_pair``, ``vibrating_table``), an instance in a file, or what a function or class in
+    a file returns when called without arguments.
+
+    Examples
+    --------
+    >>> load_model_object("impact_pair").transitions[0].name
+    'hit_right'
+    """
+    from hybrid.automaton import HybridAutomaton
+    from models import MODELS, ImpactOscillator
+    from models.automata import AUTOMATA
+
+    if spec in MODELS:
+        return MODELS[spec]
+    if spec in AUTOMATA:
+        return AUTOMATA[spec]()
+    path, name, obj = _user_attribute(spec, f"one of {sorted(MODELS) + sorted(AUTOMATA)}")
+    if obj is None:
+        raise ParameterError(f"{path!r} has no object named {name!r}")
+    if isinstance(obj, type) and issubclass(obj, ImpactOscillator):
+        return obj
+    if isinstance(obj, (HybridAutomaton, ImpactOscillator)):
+        return obj
+    if callable(obj):
+        obj = _call_user(obj, name)
+        if isinstance(obj, (HybridAutomaton, ImpactOscillator)):
+            return obj
+    raise ParameterError(f"{path}:{name} is not a model: give a HybridAutomaton, a function or class returning one, or "
+                         f"an ImpactOscillator subclass (got {type(obj).__name__})")
+
+
+def _call_user(factory, name: str):
+    """``factory()`` with the user's errors turned into one line."""
+    from hybrid.errors import VibroError
+
+    try:
+        return factory()
+    except VibroError:
+        raise
+    except TypeError as exc:  # required arguments, or a type error in the body
+        raise ParameterError(f"{name} cannot be built without arguments ({exc}); give its parameters defaults and "
+                             "set them with --param NAME=VALUE") from exc
+    except Exception as exc:  # the user's code failed: report it, do not trace back
+        raise ParameterError(f"{name}() raised {type(exc).__name__}: "
+                             f"{str(exc).splitlines()[0] if str(exc) else ''}") from exc
 
 
 def model_from_args(args: argparse.Namespace):
