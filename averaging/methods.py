@@ -4,6 +4,8 @@
 * ``exact-two-impact``: the same with dH = (1 - e1**2 e2**2)(H - G(delta)), e1 = e(v), e2 = e(e1 v): the free
   system's loss over two successive impacts (docs/paper-readings.md).
 * ``jump``: no loss drift; every impact is a jump H -> G(delta) + e(v)**2 (H - G(delta)) at rate 2/T(H).
+* ``chain``: the same jump, but at the end of each flight (duration T(H)/walls) instead of at Poisson times: the
+  impact-to-impact chain of :mod:`averaging.chain`.
 
 Each method is a small class; ``METHODS[name]`` gives an instance. New methods subclass :class:`ImpactMethod` and
 call :func:`register`.
@@ -22,11 +24,13 @@ class ImpactMethod:
     Examples
     --------
     >>> sorted(METHODS)
-    ['exact-two-impact', 'jump', 'paper']
+    ['chain', 'exact-two-impact', 'jump', 'paper']
     """
 
     name = "base"
     jumps = False
+    flights = False
+    """True when impacts come at the end of flights (the impact-to-impact chain), not at Poisson times."""
     description = ""
 
     def loss(self, law, excess, walls: int = 2):
@@ -111,6 +115,26 @@ class JumpMethod(ImpactMethod):
     description = "jump-diffusion: H -> G + e^2 (H - G) at rate 2/T(H)"
 
 
+class ChainMethod(JumpMethod):
+    """The jump of :class:`JumpMethod` applied once per flight of duration T(H)/walls (:mod:`averaging.chain`).
+
+    ``phases`` clock phases per flight, Richardson-extrapolated with phases / 2
+    (:func:`averaging.chain.chain_density`).
+
+    Examples
+    --------
+    >>> from models import Newton
+    >>> m = ChainMethod()
+    >>> m.flights, float(m.jump_target(Newton(0.5), 1.0))
+    (True, 0.25)
+    """
+
+    name = "chain"
+    flights = True
+    phases = 8
+    description = "impact-to-impact chain: H -> G + e^2 (H - G) at the end of each flight T(H)/walls"
+
+
 METHODS: dict[str, ImpactMethod] = {}
 """Registry: method name -> instance."""
 
@@ -127,7 +151,7 @@ def register(method: ImpactMethod) -> ImpactMethod:
     return method
 
 
-for _m in (PaperMethod(), ExactTwoImpactMethod(), JumpMethod()):
+for _m in (PaperMethod(), ExactTwoImpactMethod(), JumpMethod(), ChainMethod()):
     register(_m)
 
 
