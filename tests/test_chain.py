@@ -130,6 +130,8 @@ def test_bad_input():
         chain_density(model, phases=5)
     with pytest.raises(ParameterError, match="energies"):
         chain_density(model, energies=3)
+    with pytest.raises(ParameterError, match="states"):
+        chain_density(model, energies=100_000, phases=64)
     with pytest.raises(ParameterError, match="walls"):
         chain_density(_linear(), walls=(0.5, None))
     with pytest.raises(ModelError, match="barriers=None"):
