@@ -25,10 +25,11 @@ with total rate ``impact_rate`` = 1 / (mean flight duration).
 With elastic impacts the wraps do not move mass and the stationary vector is p0 uniform over the phases: the
 chain reproduces the exact elastic density (``tests/test_chain.py``).
 
-A stop at the equilibrium (``walls=(None, 0.0)`` or ``(0.0, None)`` on a model without barriers) is hit by every
-orbit at its highest speed, once per half period: G = 0 and the flight is T(H)/2. The averaged coefficients are then
-those of the half orbit on one side; they equal the full-orbit ones when g is odd and the drift and diffusion
-kernels are even in x, which is checked (a model that is not symmetric is refused).
+Geometries: as the averaging methods, every wall geometry of the model. A level H hits each wall whose energy G_w
+it exceeds once per quasi-period, so the flight is T(H)/hits(H). One impact level (a symmetric gap, a one-sided
+stop, a stop at the equilibrium, where every orbit is hit at its highest speed once per half period): the wrap
+applies that level's impact map. Two levels (an asymmetric gap): the state also remembers which wall comes next;
+between the levels only the lower wall is hit, above both the walls alternate, each with its own impact map.
 
 Examples
 --------
@@ -46,13 +47,12 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.linalg import splu
 
-from hybrid.errors import ModelError, NormalisationError, ParameterError
+from hybrid.errors import NormalisationError, ParameterError
 
 from .jump import EnergyChain
 from .methods import ImpactMethod
-from .quadrature import DEFAULT_NODES, OrbitNodes, geometry
+from .quadrature import DEFAULT_NODES, geometry
 from .stationary import StationaryDensity, _check_scale, _mass_range, check_confinement, energy_table
-from .symbolic import averaging_equations
 
 DEFAULT_PHASES = 8
 """Clock phases per flight (relative spread of the flight time 1/sqrt(8) = 0.35; extrapolated with 4)."""
@@ -68,7 +68,7 @@ class _NoLoss(ImpactMethod):
 
     name = "chain"
     jumps = True
-    description = "impact-to-impact chain: flights of duration T(H)/walls, exact impact map at each wrap"
+    description = "impact-to-impact chain: flights of duration T(H)/hits(H), exact impact map at each wrap"
 
     def jump_target(self, law, excess):
         return np.asarray(excess, dtype=float)
@@ -103,62 +103,25 @@ class ChainDensity(StationaryDensity):
         return out
 
 
-def _equilibrium_side(model, walls):
-    """The side (+1: wall at x = 0 bounding x <= 0 from the right, -1: from the left) of an equilibrium stop."""
-    if walls is None or (isinstance(walls, str) and walls == "model"):
-        return 0
-    try:
-        left, right = walls
-    except (TypeError, ValueError):
-        raise ParameterError(f"walls={walls!r} must be None, 'model', (None, 0.0) or (0.0, None)") from None
-    if left is None and right is not None and float(right) == 0.0:
-        side = +1
-    elif right is None and left is not None and float(left) == 0.0:
-        side = -1
-    else:
-        raise ParameterError(f"walls={walls!r}: the chain takes a stop at the equilibrium, (None, 0.0) or (0.0, None); "
-                             "other walls come from the model's barriers")
-    if model.barrier_exprs is not None:
-        raise ModelError("a stop at the equilibrium replaces the barriers: declare the model with barriers=None")
-    return side
-
-
-def _check_symmetric(model, nodes: int) -> None:
-    """Refuse an equilibrium stop unless the half-orbit averages equal the full-orbit ones (g odd, kernels even)."""
-    geo = geometry(model)
-    x = np.linspace(0.05, 1.0, 7)
-    if not np.allclose(geo.restoring(-x), -geo.restoring(x), rtol=1e-10, atol=1e-12):
-        raise ModelError("a stop at the equilibrium needs an odd restoring force g (the chain averages over one side "
-                         "of the orbit as over the whole); use `vibro pdf --method fpk`")
-    orb = OrbitNodes(model, np.array([0.3, 1.0]), nodes)
-    ker = averaging_equations(model).kernels
-    params = dict(model.params)
-    for name in ("drift", "diffusion"):
-        a = np.broadcast_to(ker(name, orb.x, orb.s, params), orb.x.shape)
-        b = np.broadcast_to(ker(name, -orb.x, orb.s, params), orb.x.shape)
-        if not np.allclose(a, b, rtol=1e-9, atol=1e-12 * (1.0 + np.abs(a).max())):
-            raise ModelError(f"a stop at the equilibrium needs averaged {name} kernels even in x (the chain averages "
-                             "over one side of the orbit as over the whole); use `vibro pdf --method fpk`")
-
-
-def chain_generator(chain: EnergyChain, flight, level: float, law, phases: int):
-    """Sparse generator of the (energy node, clock phase) chain, states ordered i * phases + k.
+def chain_generator(chain: EnergyChain, period, wall_levels, law, phases: int):
+    """Sparse generator of the (energy node, next wall, clock phase) chain.
 
     Parameters
     ----------
     chain : EnergyChain
         The no-loss energy chain (no jumps).
-    flight : ndarray
-        Mean flight duration at each node (T(H)/walls).
-    level : float
-        Impact energy G: a wrap above it is an impact.
+    period : ndarray
+        T(H) at each node.
+    wall_levels : sequence of float
+        One impact energy per wall (``Geometry.wall_levels``).
     law : RestitutionLaw
     phases : int
 
     Returns
     -------
-    (scipy.sparse.csr_matrix, ndarray, ndarray, ndarray)
-        Q, and the impacting wraps (source state, destination state, rate) used for the impact flux.
+    (scipy.sparse.csr_matrix, ndarray, ndarray, int)
+        Q (states ordered (i * walls_tracked + w) * phases + k), the impacting wraps (source state, rate) used for
+        the impact flux, and the number of next-wall states per node (1 with one impact level, 2 with two).
 
     Examples
     --------
@@ -167,50 +130,68 @@ def chain_generator(chain: EnergyChain, flight, level: float, law, phases: int):
     >>> m = DuffingImpact(restitution=Elastic())
     >>> tab = energy_table(m, 4.0)
     >>> ch = EnergyChain(tab, np.linspace(0, 4, 41), _NO_LOSS, m.restitution)
-    >>> Q, *_ = chain_generator(ch, tab.period(ch.grid) / 2, tab.G_delta, m.restitution, 4)
+    >>> Q, *_ = chain_generator(ch, tab.period(ch.grid), tab.geometry.wall_levels, m.restitution, 4)
     >>> bool(abs(Q.sum(axis=1)).max() < 1e-9)
     True
     """
     grid = chain.grid
     n, K = len(grid), int(phases)
+    levels = sorted(set(float(v) for v in wall_levels))
+    nw = len(levels)  # 1: every wall at one level; 2: asymmetric, the state remembers the next wall
+    hits = sum((grid > g).astype(int) for g in wall_levels)
+    rate = K * np.where(hits > 0, hits, len(wall_levels)) / np.asarray(period, dtype=float)
     Q0 = chain.generator().tocoo()
     off = Q0.row != Q0.col
-    rows = [(Q0.row[off, None] * K + np.arange(K)).ravel()]
-    cols = [(Q0.col[off, None] * K + np.arange(K)).ravel()]
-    vals = [np.repeat(Q0.data[off], K)]
-    rate = K / np.asarray(flight, dtype=float)
+    layers = nw * K
+    rows = [(Q0.row[off, None] * layers + np.arange(layers)).ravel()]
+    cols = [(Q0.col[off, None] * layers + np.arange(layers)).ravel()]
+    vals = [np.repeat(Q0.data[off], layers)]
     i = np.arange(n)
+
+    def state(node, w, k):
+        return (node * nw + w) * K + k
+
     if K > 1:  # phase k -> k + 1
         k = np.arange(K - 1)
-        rows.append((i[:, None] * K + k).ravel())
-        cols.append((i[:, None] * K + k + 1).ravel())
-        vals.append(np.repeat(rate, K - 1))
-    # wrap: phase K-1 -> 0, with the impact map above the level
-    imp = grid > level
-    quiet = ~imp
-    if K > 1:
-        rows.append(i[quiet] * K + K - 1)
-        cols.append(i[quiet] * K)
+        for w in range(nw):
+            rows.append(state(i[:, None], w, k).ravel())
+            cols.append(state(i[:, None], w, k + 1).ravel())
+            vals.append(np.repeat(rate, K - 1))
+    w_src, w_rate = [], []
+
+    def impact(src, w_from, level, w_to):
+        """Wraps of the nodes ``src`` in next-wall state ``w_from``: impact at ``level``, next wall ``w_to``."""
+        excess = grid[src] - level
+        after = level + (excess - law.impact_loss(excess))
+        j = np.clip(np.searchsorted(grid, after, side="right") - 1, 0, n - 2)
+        theta = np.clip((after - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0)
+        for dst, wt in ((j, 1.0 - theta), (j + 1, theta)):
+            r = rate[src] * wt
+            keep = r > 0
+            rows.append(state(src[keep], w_from, K - 1))
+            cols.append(state(dst[keep], w_to, 0))
+            vals.append(r[keep])
+            w_src.append(state(src[keep], w_from, K - 1))
+            w_rate.append(r[keep])
+
+    quiet = i[hits == 0]
+    for w in range(nw):  # below every level the clock turns without an impact
+        rows.append(state(quiet, w, K - 1))
+        cols.append(state(quiet, w, 0))
         vals.append(rate[quiet])
-    src = i[imp]
-    excess = grid[src] - level
-    after = level + (excess - law.impact_loss(excess))
-    j = np.clip(np.searchsorted(grid, after, side="right") - 1, 0, n - 2)
-    theta = np.clip((after - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0)
-    w_src = np.concatenate([src, src]) * K + K - 1
-    w_dst = np.concatenate([j, j + 1]) * K
-    w_rate = np.concatenate([rate[src] * (1.0 - theta), rate[src] * theta])
-    keep = w_rate > 0
-    w_src, w_dst, w_rate = w_src[keep], w_dst[keep], w_rate[keep]
-    rows.append(w_src)
-    cols.append(w_dst)
-    vals.append(w_rate)
+    if nw == 1:
+        impact(i[hits > 0], 0, levels[0], 0)
+    else:  # w = 0: the lower wall comes next, w = 1: the upper one
+        one, two = i[hits == 1], i[hits == 2]
+        for w in range(2):
+            impact(one, w, levels[0], 1)  # only the lower wall is reached; then the orbit heads to the other side
+            impact(two, w, levels[w], 1 - w)
     r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
     move = r != c
-    N = n * K
+    N = n * layers
     Q = sparse.coo_matrix((v[move], (r[move], c[move])), shape=(N, N)).tocsr()
     Q = Q - sparse.diags(np.asarray(Q.sum(axis=1)).ravel())
-    return Q.tocsr(), w_src, w_dst, w_rate
+    return Q.tocsr(), np.concatenate(w_src), np.concatenate(w_rate), nw
 
 
 def _stationary(Q) -> np.ndarray:
@@ -228,19 +209,19 @@ def _stationary(Q) -> np.ndarray:
     return pi / pi.sum()
 
 
-def _solve_chain(ch, flight, level, law, phases):
+def _solve_chain(ch, period, wall_levels, law, phases):
     """(mass per energy node, impact flux per pre-impact node) of the stationary chain with ``phases`` phases."""
     n = len(ch.grid)
-    Q, w_src, _w_dst, w_rate = chain_generator(ch, flight, level, law, phases)
+    Q, w_src, w_rate, nw = chain_generator(ch, period, wall_levels, law, phases)
     pi = _stationary(Q)
-    mass = pi.reshape(n, phases).sum(axis=1)
-    flux = np.bincount(w_src // phases, pi[w_src] * w_rate, minlength=n)
+    mass = pi.reshape(n, nw * phases).sum(axis=1)
+    flux = np.bincount(w_src // (nw * phases), pi[w_src] * w_rate, minlength=n)
     return mass, flux
 
 
 def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = DEFAULT_PHASES, *,
-                  energies: int = DEFAULT_ENERGIES, extrapolate: bool = True, walls="model", restitution=None,
-                  nodes: int = DEFAULT_NODES, check: bool = True) -> ChainDensity:
+                  energies: int = DEFAULT_ENERGIES, extrapolate: bool = True, nodes: int = DEFAULT_NODES,
+                  check: bool = True) -> ChainDensity:
     """The stationary p(H) of the impact-to-impact chain (see the module docstring).
 
     ``stationary_density(model, "chain", ...)`` calls this with the defaults.
@@ -248,7 +229,7 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
     Parameters
     ----------
     model : ImpactOscillator
-        Symmetric or one-sided barriers (as the averaging methods), or no barriers with ``walls`` at the
+        Any wall geometry the averaging methods take: symmetric, one-sided, asymmetric, or a wall at the
         equilibrium.
     h_max : float
         Upper end of the output range (the chain itself runs on the range carrying the mass).
@@ -260,10 +241,6 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
         Energy nodes of the chain (its cost ~ energies x phases; 400 resolves the paper's cases to 1e-4 in L1).
     extrapolate : bool
         Richardson extrapolation in the phases: 2 p(phases) - p(phases / 2) (``phases`` must be even).
-    walls : 'model', (None, 0.0) or (0.0, None)
-        A stop at the equilibrium instead of the model's barriers.
-    restitution : RestitutionLaw, optional
-        Replaces the model's law (needed with ``walls``).
     nodes : int
         Gauss nodes per orbit quadrature.
     check : bool
@@ -276,19 +253,17 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
     Raises
     ------
     ParameterError
-        points, energies, phases or h_max out of range, or walls not an equilibrium stop.
-    ModelError
-        Asymmetric impact levels, or an equilibrium stop on a model that is not symmetric.
+        points, energies, phases or h_max out of range.
     NormalisationError
         No stationary density.
 
     Examples
     --------
     >>> from models import ImpactOscillator, Newton
-    >>> lin = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=None)
-    >>> sd = chain_density(lin, h_max=2.5, walls=(None, 0.0), restitution=Newton(0.8))
-    >>> round(sd.mean_energy, 3)     # Monte Carlo: 0.266 +- 0.001
-    0.264
+    >>> stop = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None),
+    ...                         restitution=Newton(0.8))
+    >>> round(chain_density(stop, h_max=8.0).mean_energy, 3)     # Monte Carlo: 0.266 +- 0.001; jump: 0.304
+    0.265
     """
     import warnings
 
@@ -302,22 +277,14 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
             not (math.isfinite(float(h_max)) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     h_max, points, phases, n = float(h_max), int(points), int(phases), int(energies)
-    if n * phases > _MAX_STATES:
+    geo = geometry(model)
+    if n * phases * max(len(geo.levels), 1) > _MAX_STATES:
         raise ParameterError(f"energies x phases = {n * phases} states exceeds {_MAX_STATES:.0e} (one sparse LU of "
                              "that size needs many GB); the defaults 400 x 8 resolve the paper's cases to 1e-4 in L1")
     if extrapolate and phases % 2:
         raise ParameterError(f"phases={phases} must be even to extrapolate from phases / 2 (or extrapolate=False)")
-    side = _equilibrium_side(model, walls)
-    if restitution is not None:
-        model = model.with_restitution(restitution)
     law = model.restitution
-    geo = geometry(model)  # raises ModelError for asymmetric impact levels
-    if side:
-        _check_symmetric(model, nodes)
-        level, per_flight = 0.0, 2.0  # one wall, hit every half period at the highest speed
-    else:
-        level, per_flight = geo.G_delta, float(geo.walls)
-    impacts = per_flight > 0 and np.isfinite(level)
+    impacts = geo.walls > 0
     with np.errstate(all="ignore"):
         if check:
             check_confinement(model, _NO_LOSS, h_max, nodes)
@@ -327,19 +294,19 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
         grid = np.linspace(0.0, h, n)
         ch = EnergyChain(tab, grid, _NO_LOSS, law)
         if impacts:
-            flight = tab.period(grid) / per_flight
-            mass, flux = _solve_chain(ch, flight, level, law, phases)
+            period = tab.period(grid)
+            mass, flux = _solve_chain(ch, period, geo.wall_levels, law, phases)
             if extrapolate:
                 # the error of the flight-time spread is ~ b/K: Richardson with K/2 removes it
-                m2, f2 = _solve_chain(ch, flight, level, law, phases // 2)
+                m2, f2 = _solve_chain(ch, period, geo.wall_levels, law, phases // 2)
                 mass = np.maximum(2.0 * mass - m2, 0.0)
                 flux = np.maximum(2.0 * flux - f2, 0.0)
                 mass /= mass.sum()
             # wrap flux relative to a uniform clock (1 with elastic impacts), for the impact rate by quadrature
-            uniform = mass / flight
-            ok = (grid > level) & (uniform > 0)
+            uniform = mass * tab.impact_rate(grid)
+            ok = uniform > 0
             ratio = np.where(ok, flux / np.where(ok, uniform, 1.0), 0.0)
-            if ok.any():  # the cell across the impact level takes the value of its upper node
+            if ok.any():  # the cell across the lowest impact level takes the value of its upper node
                 first = int(np.argmax(ok))
                 ratio[:first] = ratio[first]
         else:  # no walls: no impacts, p0
@@ -359,11 +326,7 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
     sd = ChainDensity(model, _NO_LOSS, tab, H, log_p, log_density, ch.Hq, ch.wq, h_max=h_max)
     sd.phases = phases
     if impacts:
-        above = sd._qH > level
-        qH = sd._qH[above]
-        sd.impact_rate = float(np.sum(sd._qp[above] * per_flight / tab.period(qH) * np.interp(qH, grid, ratio)))
-    if side:
-        sd.prob_below_barrier = 0.0
+        sd.impact_rate = float(np.sum(sd._qp * tab.impact_rate(sd._qH) * np.interp(sd._qH, grid, ratio)))
     sd.impact_energy_H = grid
     width = np.gradient(grid)  # the width of each node's hat function: half at the two ends
     width[[0, -1]] *= 0.5

@@ -8,6 +8,8 @@ the *virtual* turning points beyond the barriers (where G, continued past the ba
 only up to arcsin((barrier - c)/r). The integrand stays analytic however close H is to G(delta), so the nearly
 singular behaviour at +-delta as H -> G(delta)+ costs nothing. When G cannot be continued to the level H beyond a
 barrier, the virtual turning point of its linearisation, delta + (H - G(delta))/g(delta), is used instead.
+Each side is cut on its own, so asymmetric walls (two impact levels) and a wall at the equilibrium (every level cut,
+the virtual turning point on the far side) use the same nodes.
 """
 
 from __future__ import annotations
@@ -32,7 +34,11 @@ def _gauss(n: int):
 
 
 class Geometry:
-    """The potential G, the force g, the barriers and G(delta) of a model at its parameter values (numpy).
+    """The potential G, the force g, the walls and their impact levels of a model at its parameter values (numpy).
+
+    ``wall_levels`` has one energy per finite wall, ``levels`` the distinct ones in increasing order (one for a
+    symmetric gap or a single wall, two for asymmetric walls), ``G_delta`` the lowest (0 for a wall at the
+    equilibrium, inf without walls).
 
     Cached per symbolic declaration and parameter values, so that repeated averaging does not touch sympy.
 
@@ -40,13 +46,11 @@ class Geometry:
     --------
     >>> from models import DuffingImpact
     >>> geo = geometry(DuffingImpact())
-    >>> round(geo.G_delta, 12), geo.barriers, geo.walls
-    (0.55, (-1.0, 1.0), 2)
+    >>> round(geo.G_delta, 12), geo.barriers, geo.walls, geo.levels
+    (0.55, (-1.0, 1.0), 2, (0.55,))
     """
 
     def __init__(self, model):
-        from hybrid.errors import ModelError
-
         ker = averaging_equations(model).potential_kernels
         if ker is None:
             # no closed form: G(x) = x * int_0^1 g(x t) dt by 48-point Gauss-Legendre (vectorised, no cancellation
@@ -67,24 +71,31 @@ class Geometry:
             self._g = lambda x: np.asarray(gf(x, *vals), dtype=float) + 0.0 * np.asarray(x, dtype=float)
         self.barriers = tuple(float(b) for b in model.barriers)
         left, right = self.barriers
-        finite = [b for b in (left, right) if np.isfinite(b)]
-        levels = [float(v) for v in self._G(np.array(finite))] if finite else []
-        # walls: how many barriers a level above G_delta hits per quasi-period (2 symmetric, 1 one-sided)
-        self.walls = len(levels)
-        if len(levels) == 2 and abs(levels[0] - levels[1]) > 1e-12 * max(1.0, abs(levels[0])):
-            raise ModelError(
-                f"G(left)={levels[0]:.6g} differs from G(right)={levels[1]:.6g}: the energy-envelope averaging "
-                "needs one impact level; use symmetric or one-sided barriers for averaging (Monte Carlo, orbits "
-                "and `vibro pdf --method fpk` accept asymmetric ones)"
-            )
-        self.G_delta = max(levels) if levels else float("inf")
-        if any(b == 0.0 for b in finite):
-            raise ModelError(
-                "a barrier at the equilibrium (G = 0 there) is hit by every orbit at its highest speed: the "
-                "energy-envelope averaging has no impact-free range to start from here; use Monte Carlo "
-                "(vibro mc) or the phase-plane density solver"
-            )
+        # one entry per finite wall: the energy above which a level hits it, once per quasi-period
+        self.wall_levels = tuple(float(self._G(np.array([b]))[0]) for b in (left, right) if np.isfinite(b))
+        self.walls = len(self.wall_levels)
+        lv = sorted(self.wall_levels)
+        if len(lv) == 2 and abs(lv[0] - lv[1]) <= 1e-12 * max(1.0, abs(lv[1])):
+            lv = [lv[1]]  # symmetric: both walls start at one level
+            self.wall_levels = (lv[0], lv[0])
+        self.levels = tuple(lv)
+        """Distinct impact levels, increasing: the energies where a wall starts being hit (kinks of T(H))."""
+        self.symmetric = len(self.levels) == 1 and self.walls == 2
+        self.G_delta = self.levels[0] if self.levels else float("inf")
+        """The lowest impact level: no impacts below it (0 for a wall at the equilibrium)."""
         self.has_barriers = bool(np.isfinite(self.G_delta))
+
+    def hits(self, H) -> np.ndarray:
+        """How many walls a level H hits per quasi-period (0, 1 or 2).
+
+        Examples
+        --------
+        >>> from models import ImpactOscillator
+        >>> geometry(ImpactOscillator("x", parameters={"D": 0.1}, barriers=(-0.5, 1.0))).hits([0.1, 0.2, 0.6])
+        array([0, 1, 2])
+        """
+        H = np.asarray(H, dtype=float)
+        return sum((H > g).astype(int) for g in self.wall_levels) + np.zeros(H.shape, dtype=int)
 
     def potential(self, x):
         """G(x)."""

@@ -98,7 +98,8 @@ class AveragedCoefficients:
         m_bar(H) (including the loss drift -loss/T for drift methods), sigma2_bar(H), T(H), and the energy loss
         per quasi-period (0 below G(delta); 0 for the jump method, where impacts are jumps).
     jump_rate, jump_target : ndarray
-        For the jump method: rate 2/T(H) of impacts above G(delta) and post-impact energy.
+        For the jump method: the rate of impacts (walls hit / T(H)) and the post-impact energy at the lowest wall
+        (at the only wall unless the walls are asymmetric).
     method : str
 
     Examples
@@ -157,20 +158,20 @@ def averaged_coefficients(model, H, method="paper", nodes: int = DEFAULT_NODES) 
     drift = o["drift"] / T
     diffusion = o["diffusion"] / T
     geo = geometry(model)
-    Gd = geo.G_delta
-    excess = np.where(H > Gd, H - Gd, 0.0)
     law = model.restitution
-    imp = H > Gd
     loss = np.zeros_like(H)
     rate = np.zeros_like(H)
     target = H.copy()
-    if imp.any():
-        if m.jumps:
-            rate[imp] = geo.walls / T[imp]
-            target[imp] = Gd + m.jump_target(law, excess[imp])
-        else:
-            loss[imp] = m.loss(law, excess[imp], geo.walls)
-            drift = drift - loss / T
+    hits = geo.hits(H)
+    if m.jumps:
+        # the jump at the lowest wall hit (the jump chain itself jumps at every wall hit, each at rate 1/T)
+        imp = hits > 0
+        rate[imp] = hits[imp] / T[imp]
+        Gd = geo.G_delta
+        target[imp] = Gd + m.jump_target(law, H[imp] - Gd)
+    else:
+        loss = m.cycle_loss(law, H, geo.wall_levels)
+        drift = drift - loss / T
     return AveragedCoefficients(H, drift, diffusion, T, loss, rate, target, m.name)
 
 
@@ -210,15 +211,13 @@ class StationaryDensity:
         self.mean_energy = float(np.sum(self._qp * qH))
         self.mean_x2 = float(np.sum(self._qp * table.mean_x2(qH)))
         self.prob_below_barrier = float(np.sum(self._qp[qH <= Gd])) if np.isfinite(Gd) else 1.0
-        above = qH > Gd
-        rate = table.walls / table.period(qH[above]) if above.any() else np.zeros(0)
-        self.impact_rate = float(np.sum(self._qp[above] * rate))
+        self.impact_rate = float(np.sum(self._qp * table.impact_rate(qH)))
         self.total_mass = float(np.sum(self._qp))
         self.tail_density = float(self.p[-1])
 
     @property
     def barrier_energy(self) -> float:
-        """G(delta) (inf without barriers)."""
+        """The lowest impact level: G(delta) for a symmetric gap, 0 for a wall at the equilibrium, inf without walls."""
         return self.table.G_delta
 
     def density(self, H):
@@ -286,12 +285,12 @@ class StationaryDensity:
             return out
         Gx = Gx[ok]
         ymax = np.sqrt(2.0 * (self.h_support - Gx))
-        Gd = self.table.G_delta
-        ykink = np.sqrt(2.0 * np.clip(Gd - Gx, 0.0, None)) if np.isfinite(Gd) else ymax
-        ykink = np.minimum(ykink, ymax)
+        # p(x, y) has a kink where the level crosses an impact level (one per level; two for asymmetric walls)
+        kinks = [np.minimum(np.sqrt(2.0 * np.clip(L - Gx, 0.0, None)), ymax) for L in self.table.geometry.levels]
+        ys = np.sort(np.vstack([np.zeros_like(ymax)] + kinks + [ymax]), axis=0)
         t, w = np.polynomial.legendre.leggauss(nodes)
         total = np.zeros_like(Gx)
-        for lo, hi in ((np.zeros_like(ymax), ykink), (ykink, ymax)):
+        for lo, hi in zip(ys[:-1], ys[1:]):
             yy = 0.5 * (lo + hi)[:, None] + 0.5 * (hi - lo)[:, None] * t
             vals = self._joint_energy(np.minimum(0.5 * yy**2 + Gx[:, None], self.h_support))
             total += np.sum(vals * w, axis=1) * 0.5 * (hi - lo)
@@ -321,17 +320,15 @@ class StationaryDensity:
         # x range where H <= h_max, and the points where H crosses G(delta) (kinks of T)
         lo, hi = turning_points(self.model, self.h_support - kin)
         lo, hi = np.maximum(lo, left), np.minimum(hi, right)
-        Gd = self.table.G_delta
-        pieces = []
-        if np.isfinite(Gd):
-            lev = np.clip(Gd - kin, 1e-300, None)
+        # the x where H crosses an impact level (kinks of T): split there, one pair per level
+        cuts = [lo, hi]
+        for L in self.table.geometry.levels:
+            lev = np.clip(L - kin, 1e-300, None)
             klo, khi = turning_points(self.model, lev)
-            has = Gd - kin > 0
-            klo = np.where(has, np.maximum(klo, lo), 0.0)
-            khi = np.where(has, np.minimum(khi, hi), 0.0)
-            pieces = [(lo, klo), (klo, khi), (khi, hi)]
-        else:
-            pieces = [(lo, hi)]
+            has = L - kin > 0
+            cuts += [np.where(has, np.clip(klo, lo, hi), lo), np.where(has, np.clip(khi, lo, hi), lo)]
+        xs = np.sort(np.vstack(cuts), axis=0)
+        pieces = list(zip(xs[:-1], xs[1:]))
         t, w = np.polynomial.legendre.leggauss(nodes)
         total = np.zeros_like(kin)
         for a, b in pieces:
@@ -379,7 +376,7 @@ def _check_scale(model, m, nodes) -> None:
     the model's own energy G(delta) (or G(1) without barriers). It must lie within 1e-100 to 1e100 of it.
     """
     G = geometry(model).G_delta
-    ref = float(G) if np.isfinite(G) else float(model.potential(1.0))
+    ref = float(G) if np.isfinite(G) and G > 0 else float(model.potential(1.0))  # wall at the equilibrium: G = 0
     H = ref * np.array([0.25, 0.2501, 0.5, 0.5001, 0.9, 0.9001])
     coef = averaged_coefficients(model, H, m if not m.jumps else "exact-two-impact", nodes)
     s2 = coef.diffusion
@@ -435,8 +432,7 @@ def _solve(model, m, law, nodes, h: float, points: int):
     tab = energy_table(model, h, nodes)
     H = np.linspace(0.0, float(h), int(points))
     if not m.jumps:
-        cuts = [v / np.sqrt(2.0) for v in m.speed_breakpoints(law)] if tab.has_impacts else []
-        qH, qw = tab.quadrature(cuts=cuts)
+        qH, qw = tab.quadrature(cuts=tab.loss_breakpoints(m, law) if tab.has_impacts else [])
         lq = tab.log_density(qH, m, law)
         S = float(np.max(lq))
         logZ = S + np.log(np.sum(qw * np.exp(lq - S)))
@@ -492,7 +488,8 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
     Parameters
     ----------
     model : ImpactOscillator
-        Any model with a single confining well and symmetric impact level G(left) = G(right).
+        Any model with a single confining well, between any walls: symmetric, asymmetric (G(left) != G(right)),
+        one-sided, or a wall at the equilibrium.
     method : str or ImpactMethod
         ``paper`` (eq. 13 loss as drift), ``exact-two-impact``, ``jump`` (impacts as jumps at Poisson times), or
         ``chain`` (the jumps at the end of each flight, :func:`averaging.chain.chain_density`).
@@ -541,7 +538,6 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
         from .chain import chain_density
 
         return chain_density(model, h_max=h_max, points=points, phases=m.phases, nodes=nodes, check=check)
-    geometry(model)  # raises ModelError for asymmetric impact levels
     law = model.restitution
     try:
         with np.errstate(all="ignore"):

@@ -1,10 +1,12 @@
 """Chebyshev tables of the averaged coefficients on [0, h_max]: the fast path behind p(H).
 
-The orbit integrals are analytic in H below the impact level G(delta) and analytic in u = sqrt(H - G(delta))
-above it (the barrier cuts the orbit: T(H) has a square-root kink at G(delta)). So each piece is represented by an
-adaptive Chebyshev interpolant in its natural variable; a few dozen levels replace thousands of quadratures, and
-integrals of eq. 30 are integrals of polynomials. Near H = 0 the eq. 30 integrand 2 m/s2 behaves like kappa/H: the
-table keeps kappa log H analytically and interpolates the regular rest.
+The orbit integrals are analytic in H below the first impact level and analytic in u = sqrt(H - L) just above each
+impact level L (a wall starts cutting the orbit there: T(H) has a square-root kink at L). The energy range is cut
+at every impact level (one level for a symmetric gap or a one-sided stop, two for asymmetric walls), and each piece
+is an adaptive Chebyshev interpolant in its natural variable; a few dozen levels replace thousands of quadratures,
+and integrals of eq. 30 are integrals of polynomials. Near H = 0 the eq. 30 integrand 2 m/s2 behaves like kappa/H:
+the table keeps kappa log H analytically and interpolates the regular rest. A wall at the equilibrium (level 0) is
+hit by every orbit: the first piece is then in u = sqrt(H) from 0, with the same kappa log H treatment.
 """
 
 from __future__ import annotations
@@ -111,6 +113,66 @@ def _fit_many(fun, a, b, scales):
     return {k: Cheb(c, a, b) for k, c in coefs.items()}, t, vals
 
 
+class _UPiece:
+    """Fits on [L, L + U**2] in u = sqrt(H - L) above the impact level L (the orbit is cut by the walls below)."""
+
+    zero = False
+
+    def __init__(self, level, U, fits):
+        self.level, self.U, self.f = float(level), float(U), fits
+        self.phi2 = fits["f2"].antiderivative()
+        self.logp = EnergyTable._sum(self.phi2, -1.0 * fits["logB"], fits["logT"])
+        self.phi_base = 0.0  # Phi at the level, set by the table
+
+    def u(self, H):
+        return np.sqrt(np.maximum(H - self.level, 0.0))
+
+    def period(self, u):
+        return np.exp(self.f["logT"](u))
+
+    def diffusion(self, u):
+        return np.exp(self.f["logB"](u) - self.f["logT"](u))
+
+    def log_B(self, u):
+        return self.f["logB"](u)
+
+    def log_p0(self, u):
+        return self.phi_base + self.logp(u)
+
+    def phi_end(self):
+        return self.phi_base + float(self.phi2(self.U))
+
+
+class _ZeroPiece(_UPiece):
+    """A wall at the equilibrium: fits in u = sqrt(H) from 0, with sigma2_bar ~ H**m and 2 m/s2 ~ kappa/H there."""
+
+    zero = True
+
+    def __init__(self, U, fits, m_exp, kappa, phi_reg):
+        self.level, self.U, self.f = 0.0, float(U), fits
+        self.m_exp, self.kappa, self.phi_reg = m_exp, kappa, phi_reg
+        self.nu = kappa - m_exp
+        self.logp = EnergyTable._sum(phi_reg, -1.0 * fits["lam"], fits["logT"])
+        self.phi_base = 0.0
+
+    def diffusion(self, u):
+        with np.errstate(divide="ignore"):
+            return np.exp(self.f["lam"](u) - self.f["logT"](u)) * (u * u) ** self.m_exp
+
+    def log_B(self, u):
+        with np.errstate(divide="ignore"):
+            return self.f["lam"](u) + self.m_exp * np.log(u * u)
+
+    def log_p0(self, u):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lead = np.where(u > 0, self.nu * np.log(u * u), 0.0 if self.nu == 0 else (
+                np.inf if self.nu < 0 else -np.inf))
+        return lead + self.logp(u)
+
+    def phi_end(self):
+        return self.kappa * np.log(self.U**2) + float(self.phi_reg(self.U))
+
+
 class EnergyTable:
     """Averaged coefficients of ``model`` on [0, h_max] (no impact loss), as Chebyshev interpolants.
 
@@ -135,13 +197,30 @@ class EnergyTable:
         self.model = model
         self.h_max = float(h_max)
         self.nodes = nodes
-        self.G_delta = geometry(model).G_delta
-        self.walls = geometry(model).walls
-        self.H1 = min(self.G_delta, self.h_max)
-        self._fit_low()
+        geo = geometry(model)
+        self.geometry = geo
+        self.G_delta = geo.G_delta
+        self.walls = geo.walls
+        self.wall_levels = geo.wall_levels
+        self.levels = [L for L in geo.levels if L < self.h_max]
         self.has_impacts = self.h_max > self.G_delta
-        if self.has_impacts:
-            self._fit_high()
+        self.H1 = min(self.G_delta, self.h_max)
+        self.pieces: list[_UPiece] = []
+        if self.levels and self.levels[0] == 0.0:
+            self._fit_zero(min(self.levels[1], self.h_max) if len(self.levels) > 1 else self.h_max)
+            rest = self.levels[1:]
+        else:
+            self._fit_low()
+            rest = self.levels
+        for k, L in enumerate(rest):
+            top = rest[k + 1] if k + 1 < len(rest) else self.h_max
+            self._fit_high(L, top)
+        phi = self.phi_at_G
+        for piece in self.pieces:
+            if not piece.zero:
+                piece.phi_base = phi
+            phi = piece.phi_end()
+        self.starts = np.array([p.level for p in self.pieces])
         self._loss_cache: dict[tuple, list] = {}
 
     # ------------------------------------------------------------------ fits
@@ -170,7 +249,13 @@ class EnergyTable:
 
         f, Hn, vals = _fit_many(quantities, 0.0, H1, {"x2": 0.0})
         self.low = f
-        kappa = float(f["g1"](0.0))
+        kappa, nu = self._kappa(float(f["g1"](0.0)))
+        # Phi_reg(H) = int_0^H (2 m/s2 - kappa/h) dh: fit (g1(h) - kappa)/h on the same nodes
+        reg = (vals["g1"] - kappa) / Hn
+        self.phi_reg = Cheb(cheb_coefficients(reg), 0.0, H1).antiderivative()
+        self.phi_at_G = self.kappa * np.log(H1) + float(self.phi_reg(H1))
+
+    def _kappa(self, kappa):
         nu = kappa - self.m_exp
         if abs(nu) < 1e-7:  # additive noise: 2 m/s2 ~ 1/H exactly, p(0) finite
             kappa, nu = self.m_exp, 0.0
@@ -180,16 +265,37 @@ class EnergyTable:
                 f"the density behaves like H**{nu:.3g} at H = 0, which is not integrable: the averaged drift "
                 "cannot keep the energy away from 0 (noise vanishing at rest). No stationary density exists"
             )
-        # Phi_reg(H) = int_0^H (2 m/s2 - kappa/h) dh: fit (g1(h) - kappa)/h on the same nodes
-        reg = (vals["g1"] - kappa) / Hn
-        self.phi_reg = Cheb(cheb_coefficients(reg), 0.0, H1).antiderivative()
+        return kappa, nu
 
-    def _fit_high(self):
-        U = np.sqrt(self.h_max - self.G_delta)
-        Gd = self.G_delta
+    def _fit_zero(self, top):
+        """The first piece for a wall at the equilibrium: every level is cut, fitted in u = sqrt(H) from 0."""
+        U = np.sqrt(top)
+        tiny = self._orbits(np.array([1e-7, 2e-7]) * top)["diffusion"]
+        self.m_exp = round(2.0 * np.log2(tiny[1] / tiny[0])) / 2.0
 
         def quantities(u):
-            o = self._orbits(Gd + u * u)
+            H = u * u
+            o = self._orbits(H)
+            return {
+                "logT": np.log(o["T"]),
+                "lam": np.log(o["diffusion"]) - self.m_exp * np.log(H),
+                "g1": 2.0 * H * o["drift"] / o["diffusion"],
+                "x2": o["x2"] / o["T"],
+            }
+
+        f, un, vals = _fit_many(quantities, 0.0, U, {"x2": 0.0})
+        kappa, nu = self._kappa(float(f["g1"](0.0)))
+        # Phi_reg = int_0^H (2 m/s2 - kappa/h) dh = int_0^u 2 (g1 - kappa)/u' du'
+        phi_reg = Cheb(cheb_coefficients(2.0 * (vals["g1"] - kappa) / un), 0.0, U).antiderivative()
+        self.H1 = 0.0
+        self.phi_at_G = -np.inf  # no impact-free range
+        self.pieces.append(_ZeroPiece(U, f, self.m_exp, kappa, phi_reg))
+
+    def _fit_high(self, level, top):
+        U = np.sqrt(top - level)
+
+        def quantities(u):
+            o = self._orbits(level + u * u)
             return {
                 "logT": np.log(o["T"]),
                 "logB": np.log(o["diffusion"]),
@@ -198,56 +304,75 @@ class EnergyTable:
             }
 
         f, _, _ = _fit_many(quantities, 0.0, U, {})
-        self.high = f
-        self.phi2 = f["f2"].antiderivative()
-        self.U = U
-        self.phi_at_G = self.kappa * np.log(Gd) + float(self.phi_reg(Gd))
+        self.pieces.append(_UPiece(level, U, f))
 
     # ------------------------------------------------------------------ loss drift of a method
+    def loss_breakpoints(self, method: ImpactMethod, law) -> list[float]:
+        """Energies inside (0, h_max) where the method's loss per quasi-period has a kink."""
+        return [h for h in method.loss_breakpoints(law, self.wall_levels) if 0.0 < h < self.h_max]
+
     def _loss_pieces(self, method: ImpactMethod, law):
-        """Cumulative int 2 L / B dH over the impact range, piecewise between kinks of the loss (in u)."""
+        """Cumulative int 2 L / B dH over the impact range, piecewise between levels and kinks of the loss (in u)."""
         key = (method.name, law)  # laws compare by type and parameters (custom callables by identity)
         if key in self._loss_cache:
             return self._loss_cache[key]
-        cuts = [v / np.sqrt(2.0) for v in method.speed_breakpoints(law)]
-        edges = _edges(cuts, self.U)
-        pieces = []
+        kinks = self.loss_breakpoints(method, law)
+        out = []
         total = 0.0
-        logB = self.high["logB"]
-        for a, b in zip(edges[:-1], edges[1:]):
-            def integrand(u):
-                return 4.0 * u * method.loss(law, u * u, self.walls) * np.exp(-logB(u))
+        levels = self.wall_levels
+        for piece in self.pieces:
+            cuts = [np.sqrt(h - piece.level) for h in kinks if piece.level < h < piece.level + piece.U**2]
+            edges = _edges(cuts, piece.U)
+            pieces = []
+            for a, b in zip(edges[:-1], edges[1:]):
+                def integrand(u, piece=piece):
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        val = 4.0 * u * method.cycle_loss(law, piece.level + u * u, levels) * np.exp(-piece.log_B(u))
+                    return np.where(u > 0, val, 0.0)
 
-            F = Cheb.fit(integrand, a, b).antiderivative()
-            pieces.append((a, b, total, F))
-            total += float(F(b))
-        self._loss_cache[key] = pieces
-        return pieces
+                if piece.zero and a == 0.0:
+                    probe = integrand(np.array([1e-6, 1e-3]) * b)
+                    if probe[0] > 10.0 * probe[1] + 1e-300:
+                        raise NormalisationError(
+                            "the impact loss at a wall at the equilibrium outweighs the noise near H = 0 (noise "
+                            "vanishing at rest): the drift methods have no density there; use --method jump or fpk")
+                F = Cheb.fit(integrand, a, b).antiderivative()
+                pieces.append((a, b, total, F))
+                total += float(F(b))
+            out.append(pieces)
+        self._loss_cache[key] = out
+        return out
 
-    def loss_integral(self, u, method, law):
-        """int_{G}^{G + u**2} 2 L(h) / B(h) dh for the drift methods."""
+    def loss_integral(self, k, u, method, law):
+        """int 2 L(h) / B(h) dh from the first impact level to the level u of piece k, for the drift methods."""
         u = np.asarray(u, dtype=float)
         out = np.zeros_like(u)
-        for a, b, base, F in self._loss_pieces(method, law):
+        pieces = self._loss_pieces(method, law)[k]
+        for a, b, base, F in pieces:
             inside = (u >= a) & (u <= b)
             out = np.where(inside, base + F(np.clip(u, a, b)), out)
             out = np.where(u > b, base + float(F(b)), out)
         return out
 
     # ------------------------------------------------------------------ evaluation
-    def _piecewise(self, H, low_fn, high_fn):
-        """Evaluate ``low_fn(H)`` below G(delta) and ``high_fn(u)`` above it, each only where needed."""
+    def _piecewise(self, H, low_fn, piece_fn):
+        """``low_fn(H)`` below the first impact level, ``piece_fn(piece, k, u)`` on each piece above it."""
         H = np.asarray(H, dtype=float)
         if np.any(H < 0) or np.any(H > self.h_max * (1 + 1e-12)):
             raise ParameterError(f"energies must lie in [0, h_max={self.h_max:g}]")
-        if not self.has_impacts:
+        if not self.pieces:
             return low_fn(H)
-        low = H <= self.H1
         out = np.empty_like(H)
+        idx = np.searchsorted(self.starts, H, side="left") - 1  # a level itself belongs to the piece below
+        if self.pieces[0].zero:
+            idx = np.maximum(idx, 0)
+        low = idx < 0
         if low.any():
             out[low] = low_fn(H[low])
-        if not low.all():
-            out[~low] = high_fn(np.sqrt(H[~low] - self.G_delta))
+        for k, piece in enumerate(self.pieces):
+            sel = idx == k
+            if sel.any():
+                out[sel] = piece_fn(piece, k, piece.u(H[sel]))
         return out
 
     @staticmethod
@@ -267,7 +392,7 @@ class EnergyTable:
         >>> bool(EnergyTable(DuffingImpact(), 4.0).period(1.0) < 2 * np.pi)     # hardening and barriers
         True
         """
-        return self._piecewise(H, lambda h: np.exp(self.low["logT"](h)), lambda u: np.exp(self.high["logT"](u)))
+        return self._piecewise(H, lambda h: np.exp(self.low["logT"](h)), lambda p, k, u: p.period(u))
 
     def diffusion(self, H):
         """sigma2_bar(H) from the table."""
@@ -275,11 +400,28 @@ class EnergyTable:
             with np.errstate(divide="ignore"):
                 return np.exp(self.low["lam"](h) - self.low["logT"](h)) * h**self.m_exp
 
-        return self._piecewise(H, low, lambda u: np.exp(self.high["logB"](u) - self.high["logT"](u)))
+        return self._piecewise(H, low, lambda p, k, u: p.diffusion(u))
 
     def mean_x2(self, H):
         """<x**2> on the level H."""
-        return self._piecewise(H, self.low["x2"], self.high["x2"] if self.has_impacts else None)
+        return self._piecewise(H, lambda h: self.low["x2"](h), lambda p, k, u: p.f["x2"](u))
+
+    def impact_rate(self, H):
+        """Impacts per unit time on the level H: the walls it hits over T(H).
+
+        Examples
+        --------
+        >>> from models import ImpactOscillator
+        >>> m = ImpactOscillator("x", parameters={"D": 0.1}, barriers=(0, None))
+        >>> round(float(EnergyTable(m, 2.0).impact_rate(1.0)), 12) == round(1 / np.pi, 12)   # once per half period
+        True
+        """
+        H = np.asarray(H, dtype=float)
+        n = self.geometry.hits(H)
+        out = np.zeros_like(H)
+        if np.any(n > 0):
+            out[n > 0] = n[n > 0] / self.period(H[n > 0])
+        return out
 
     def log_density(self, H, method: ImpactMethod | None = None, law=None):
         """Unnormalised log p(H) of eq. 30 (with the method's loss drift, or none for ``method=None``).
@@ -292,10 +434,8 @@ class EnergyTable:
         >>> bool(abs((lp[1] - lp[0]) - (np.log(tab.period(1.0) / tab.period(0.2)) - 0.8 / 2)) < 1e-10)
         True
         """
-        if not hasattr(self, "_low_logp"):
+        if not hasattr(self, "_low_logp") and hasattr(self, "low"):
             self._low_logp = self._sum(self.phi_reg, -1.0 * self.low["lam"], self.low["logT"])
-            if self.has_impacts:
-                self._high_logp = self._sum(self.phi2, -1.0 * self.high["logB"], self.high["logT"])
 
         def low(h):
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -303,33 +443,44 @@ class EnergyTable:
                                                                                      else -np.inf))
             return lead + self._low_logp(h)
 
-        def high(u):
-            out = self.phi_at_G + self._high_logp(u)
+        def high(piece, k, u):
+            out = piece.log_p0(u)
             if method is not None and not method.jumps:
-                out = out - self.loss_integral(u, method, law)
+                out = out - self.loss_integral(k, u, method, law)
             return out
 
         return self._piecewise(H, low, high)
 
     # ------------------------------------------------------------------ quadrature on [0, h_max]
     def quadrature(self, n: int = 160, cuts=()):
-        """Nodes and weights for int_0^h_max F(H) H**nu dH-type integrands of p(H) (weights include H**nu).
+        """Nodes and weights for integrals of p(H) over [0, h_max] (the weights carry the H**nu behaviour at 0).
 
-        The low piece uses Gauss-Jacobi with the exact H**nu behaviour at 0; the high piece Gauss-Legendre in u,
-        split at ``cuts`` (values of u where the integrand has a kink).
+        The impact-free piece uses Gauss-Jacobi with the exact H**nu behaviour at 0; each piece above an impact
+        level Gauss-Legendre in its u, split at ``cuts`` (energies where the integrand has a kink). A wall at the
+        equilibrium puts the H**nu behaviour into the first u piece (Gauss-Jacobi in u).
         """
         nodes, weights = [], []
-        t, w = _jacobi(n, self.nu)
-        H1 = self.H1
-        nodes.append(0.5 * H1 * (t + 1.0))
-        # p = H**nu * exp(R): the Jacobi weight carries H**nu; divide it out again below for uniform treatment
-        with np.errstate(divide="ignore", invalid="ignore"):
-            weights.append(w * (0.5 * H1) ** (self.nu + 1.0) / nodes[-1] ** self.nu)
-        if self.has_impacts:
-            edges = _edges(cuts, self.U)
-            tl, wl = _gauss(n)
+        if hasattr(self, "low"):
+            t, w = _jacobi(n, self.nu)
+            H1 = self.H1
+            nodes.append(0.5 * H1 * (t + 1.0))
+            # p = H**nu * exp(R): the Jacobi weight carries H**nu; divide it out again below for uniform treatment
+            with np.errstate(divide="ignore", invalid="ignore"):
+                weights.append(w * (0.5 * H1) ** (self.nu + 1.0) / nodes[-1] ** self.nu)
+        tl, wl = _gauss(n)
+        for piece in self.pieces:
+            inner = [np.sqrt(h - piece.level) for h in cuts if piece.level < h < piece.level + piece.U**2]
+            edges = _edges(inner, piece.U)
             for a, b in zip(edges[:-1], edges[1:]):
+                if piece.zero and a == 0.0:
+                    # p dH = u**(2 nu) exp(R) 2 u du: Jacobi weight u**(2 nu + 1)
+                    beta = 2.0 * piece.nu + 1.0
+                    t, w = _jacobi(n, beta)
+                    u = 0.5 * b * (t + 1.0)
+                    nodes.append(u * u)
+                    weights.append(2.0 * w * (0.5 * b) ** (beta + 1.0) / u ** (2.0 * piece.nu))
+                    continue
                 u = 0.5 * (a + b) + 0.5 * (b - a) * tl
-                nodes.append(self.G_delta + u * u)
+                nodes.append(piece.level + u * u)
                 weights.append(0.5 * (b - a) * wl * 2.0 * u)
         return np.concatenate(nodes), np.concatenate(weights)

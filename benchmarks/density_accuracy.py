@@ -146,11 +146,12 @@ def equilibrium_cases(grid=None):
         t0 = time.perf_counter()
         # the chain's top is reflecting: h_max = 8 leaves < 1e-4 of E[H] to the cut (the Poisson clock's tail is heavy)
         _cold()
-        ch = chain_density(lin, h_max=8.0, walls=(None, 0.0), restitution=eq_model(r).restitution)
+        stop = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None),
+                                restitution=eq_model(r).restitution)
+        ch = chain_density(stop, h_max=8.0)
         tc = time.perf_counter() - t0
-        # one phase, no extrapolation: the Poisson clock of the jump method (which refuses this geometry)
-        po = chain_density(lin, h_max=8.0, walls=(None, 0.0), restitution=eq_model(r).restitution, phases=1,
-                           extrapolate=False)
+        # one phase, no extrapolation: the Poisson clock of the jump method
+        po = chain_density(stop, h_max=8.0, phases=1, extrapolate=False)
         print(f"{r:4.1f} {sd.mean_energy:8.5f} {tf:6.2f} {e1:9.5f}±{c1:.5f} {e2:9.5f}±{c2:.5f} "
               f"{100 * (sd.mean_energy / e2 - 1):+10.2f} % | {ch.mean_energy:8.5f} {tc:7.3f} "
               f"{100 * (ch.mean_energy / e2 - 1):+7.2f} % | {po.mean_energy:8.5f} "

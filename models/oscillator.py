@@ -289,7 +289,8 @@ class ImpactOscillator:
         Raises
         ------
         ModelError
-            When G(left) != G(right): the energy-envelope averaging needs one impact energy level.
+            When G(left) != G(right): there is no single impact level (``averaging.quadrature.geometry(model)``
+            gives each wall's level).
 
         Examples
         --------
@@ -304,9 +305,9 @@ class ImpactOscillator:
         levels = [float(v) for v in self.potential(np.array(finite))]
         if len(levels) == 2 and abs(levels[0] - levels[1]) > 1e-12 * max(1.0, abs(levels[0])):
             raise ModelError(
-                f"G(left)={levels[0]:.6g} differs from G(right)={levels[1]:.6g}: the energy-envelope averaging assumes "
-                "one impact level G(delta). Use symmetric or one-sided barriers for averaging; Monte Carlo and orbits "
-                "accept asymmetric ones"
+                f"G(left)={levels[0]:.6g} differs from G(right)={levels[1]:.6g}: asymmetric walls have no single "
+                "impact level G(delta) (each wall is hit above its own level; the averaging and Monte Carlo handle "
+                "them, eqs. 11-14 of the free orbit assume one level)"
             )
         return max(levels)
 
@@ -378,7 +379,9 @@ class ImpactOscillator:
         left, right = self.barriers
         span_l = left if np.isfinite(left) else -50.0
         span_r = right if np.isfinite(right) else 50.0
-        xs = np.concatenate([np.linspace(span_l, 0, samples)[:-1], np.linspace(0, span_r, samples)[1:]])
+        # a wall at the equilibrium leaves one side empty (no samples there)
+        xs = np.concatenate([np.linspace(span_l, 0, samples)[:-1] if span_l < 0 else [],
+                             np.linspace(0, span_r, samples)[1:] if span_r > 0 else []])
         gx = self.restoring(xs)
         bad = ~(xs * gx > 0)
         if bad.any():
@@ -388,8 +391,9 @@ class ImpactOscillator:
                 "(for example a > 0 and b >= 0 in a Duffing restoring force)"
             )
         if not (np.isfinite(left) and np.isfinite(right)):
-            far = self.potential(np.array([span_l, span_r]))
-            near = self.potential(np.array([span_l / 2, span_r / 2]))
+            open_sides = [v for v, b in ((span_l, left), (span_r, right)) if not np.isfinite(b)]
+            far = self.potential(np.array(open_sides))
+            near = self.potential(np.array(open_sides) / 2)
             if not np.all(far > 2 * near):
                 raise ModelError(
                     "without barriers the potential must grow without bound (confine the motion); "

@@ -163,6 +163,44 @@ def test_bad_requests_are_refused_in_one_line():
                            **{**base, "histograms": {}, "x0": (0, 0)})
 
 
+def test_step_rule_for_any_guard_agrees_with_the_oscillator_rule_on_walls():
+    """The guard rule (4 x rms guard change per step against the guard's span) is the oscillator's speed * dt / gap
+    rule for walls x = +-delta: the pilot refuses where check_step refuses, the run warns on a coarse step, and
+    the figures it reports scale like dt."""
+    from hybrid.errors import StepSizeError
+    from hybrid.stochastic import StepSizeWarning, check_step
+    from models import DuffingImpact
+
+    model = DuffingImpact()
+    auto = model.to_automaton()
+    kw = dict(paths=16, chunk_paths=2, t_end=200.0, t_burn=20.0, x0=(0.0, 0.0), seed=3, histograms={"H": (0, 4, 20)})
+    with pytest.raises(StepSizeError):
+        check_step(model, 0.5)
+    with pytest.raises(StepSizeError, match="moves the guard of transition") as err:
+        simulate_automaton(auto, "splitting", dt=0.5, **kw)
+    assert "\n" not in str(err.value) and "use dt <=" in str(err.value)
+    with pytest.warns(StepSizeWarning, match="coarse"):
+        coarse = simulate_automaton(auto, "splitting", dt=0.2, **kw)
+    fine = simulate_automaton(auto, "splitting", dt=0.01, **kw)
+    assert fine.settings["step_rule"]["ratio"] < 0.1 < coarse.settings["step_rule"]["ratio"] < 0.5
+    # the span of each wall guard is the gap 2 delta, and the move is first order in dt
+    assert fine.settings["step_rule"]["right"]["span"] == pytest.approx(2.0, rel=0.05)
+    ratio = coarse.settings["step_rule"]["ratio"] / fine.settings["step_rule"]["ratio"]
+    assert 10 < ratio < 30  # dt ratio 20
+
+
+def test_inelastic_chattering_on_the_step_scale_is_reported():
+    from hybrid.stochastic import ChatteringWarning
+
+    # r = 0.2 at an equilibrium stop with strong noise: low-energy paths re-impact (rate 0.62 at dt = 0.1 against
+    # 0.73 at dt = 0.01, not resolved), about one transition every 16 steps
+    A = equilibrium_stop_automaton()
+    with pytest.warns(ChatteringWarning, match="transitions per path-step"):
+        simulate_automaton(A, "splitting", dt=0.1, paths=16, chunk_paths=2, t_end=100.0, t_burn=10.0, x0=(0.5, 0.0),
+                           seed=2, params={"r": 0.2, "D": 2.0, "c": 0.01}, histograms={"H": (0, 50, 20)},
+                           check_dt=False)
+
+
 @pytest.mark.parametrize("script", ["06_equilibrium_stop.py", "07_impact_pair.py"])
 def test_examples_06_07_run_headless_and_pass_their_checks(script):
     import os

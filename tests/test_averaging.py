@@ -24,7 +24,7 @@ from averaging import (
 )
 from averaging.jump import EnergyChain
 from averaging.stationary import energy_table
-from hybrid.errors import ModelError, NormalisationError, ParameterError
+from hybrid.errors import NormalisationError, ParameterError
 from models import DuffingImpact, Elastic, ImpactOscillator, Ma, Newton, X, Y
 
 # ----------------------------------------------------------------------------- oracles
@@ -346,9 +346,6 @@ def test_bad_inputs_have_clear_errors():
         stationary_density(DuffingImpact(), "paper", points=2)
     with pytest.raises(NormalisationError, match="noise"):
         stationary_density(DuffingImpact(D=0.0), "paper")
-    asym = ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.01}, barriers=(-0.5, 1.0))
-    with pytest.raises(ModelError, match="G\\(left\\)"):
-        stationary_density(asym, "paper")
     with pytest.raises(ParameterError, match="H > 0"):
         averaged_coefficients(DuffingImpact(), [0.0])
 

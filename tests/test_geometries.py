@@ -121,10 +121,3 @@ def test_one_sided_stop_loses_one_impact_per_quasi_period():
         assert averaged_coefficients(m, H, method).loss[0] == pytest.approx(0.75 * 0.4, rel=1e-12)
     jump = averaged_coefficients(m, H, "jump")
     assert jump.jump_rate[0] == pytest.approx(1.0 / jump.period[0], rel=1e-12)
-
-
-def test_averaging_refuses_a_stop_at_the_equilibrium_with_a_reason():
-    from averaging import stationary_density
-
-    with pytest.raises(ModelError, match="equilibrium"):
-        stationary_density(equilibrium_stop(0.8), method="jump", h_max=4.0)

@@ -241,6 +241,24 @@ def test_the_limits_can_be_lowered_and_raised():
     assert quiet(simulate_ensemble, DuffingImpact(), "milstein", max_path_steps=1e5, **kw).paths == 8
 
 
+def test_too_many_chunks_are_refused_before_seeding_them():
+    """10**8 paths over 10 steps is little work but 1.25e7 chunks of 8, whose seeds alone would take minutes."""
+    import time
+
+    from hybrid.stochastic import simulate_automaton
+    from models import DuffingImpact as Model
+
+    kw = dict(dt=0.01, paths=10**8, t_end=0.1, t_burn=0.0, xy_bins=None, check_dt=False)
+    start = time.perf_counter()
+    with pytest.raises(ParameterError, match=r"chunks, above the limit .*chunk_paths >= 96") as info:
+        simulate_ensemble(Model(), "milstein", **kw)
+    assert "\n" not in str(info.value)
+    with pytest.raises(ParameterError, match="chunk_paths >= 96"):
+        simulate_automaton(Model().to_automaton(), "em", dt=0.01, paths=10**8, t_end=0.1, x0=(0, 0), seed=1,
+                           histograms={"H": (0, 4, 4)}, chunk_paths=8)
+    assert time.perf_counter() - start < 5.0  # refused up front, not after spawning the streams
+
+
 @pytest.mark.parametrize("bad", [
     ["--paths", "1000000000000"], ["--t-end", "1e12"], ["--bins", "1000000000"], ["--dt", "1e-300"],
     ["--t-end", "1e300"], ["--joint", "JOINT", "--xy-bins", "100000", "100000"],

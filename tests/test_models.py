@@ -126,7 +126,7 @@ def test_non_confining_and_double_well_potentials_are_refused():
     ImpactOscillator("x + x**3", parameters={"D": 0.1}, barriers=None).check_single_well()
 
 
-def test_asymmetric_barriers_allowed_but_refused_for_averaging():
+def test_asymmetric_barriers_have_no_single_barrier_energy():
     m = ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.1, "dl": 0.5, "dr": 1.0},
                          barriers=("-dl", "dr"), positive=("dl", "dr"))
     assert m.barriers == (-0.5, 1.0)

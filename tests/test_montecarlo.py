@@ -406,6 +406,27 @@ def test_bitwise_identical_for_one_and_two_threads():
     assert one.mean_energy == two.mean_energy
 
 
+def test_grouped_problem_algorithm_execution_give_the_flat_call_bitwise():
+    from hybrid.errors import ParameterError
+    from hybrid.stochastic import EnsembleProblem, Execution, MonteCarloAlgorithm, solve_ensemble
+
+    model = DuffingImpact()
+    flat = simulate_ensemble(model, "splitting", dt=0.01, paths=16, t_end=60.0, t_burn=10.0, seed=4,
+                             xy_bins=(10, 10), h_max=5.0)
+    problem = EnsembleProblem(model, t_end=60.0, t_burn=10.0, xy_bins=(10, 10), h_max=5.0)
+    grouped = solve_ensemble(problem, MonteCarloAlgorithm("splitting", dt=0.01), Execution(paths=16, seed=4))
+    for f in ("h_counts", "xy_counts", "v_counts", "chunk_counts", "chunk_sums"):
+        assert np.array_equal(getattr(flat, f), getattr(grouped, f)), f
+    # the execution group never changes a number: two threads' worth of chunks on the dask-free local pool
+    again = solve_ensemble(problem.with_(h_max=5.0), MonteCarloAlgorithm("splitting", dt=0.01),
+                           Execution(paths=16, seed=4, checkpoint_every=1))
+    assert np.array_equal(again.h_counts, flat.h_counts)
+    with pytest.raises(ParameterError, match="no field"):
+        problem.with_(dtt=0.1)
+    with pytest.raises(ParameterError, match="expected a MonteCarloAlgorithm"):
+        solve_ensemble(problem, Execution(paths=16))
+
+
 def test_merge_adds_exactly_and_refuses_double_counting():
     model = DuffingImpact()
     kw = dict(dt=0.01, paths=16, t_end=100.0, t_burn=10.0, xy_bins=None)

@@ -193,6 +193,21 @@ def simulate_orbit(
     """
     wall0 = time.perf_counter()
     automaton, values, model = _as_automaton(system, params)
+    t0, t_end, state, mode = _validate(automaton, model, values, x0, t0, t_end, mode, min_dwell, max_impacts,
+                                       max_steps, zeno_window, zeno_rtol)
+    engine = _make_engine(backend, automaton, values, rtol=rtol, atol=atol, dense=dense, **options)
+    zeno = ZenoDetector(int(zeno_window), float(zeno_rtol)) if zeno_window else None
+    run = _EventLoop(automaton, values, model, engine, zeno, dense)
+    run.run(t0, t_end, state, mode, min_dwell=min_dwell, max_impacts=max_impacts, max_steps=max_steps)
+    settings = {"backend": engine.name, "t0": t0, "t_end": t_end, "min_dwell": min_dwell, "max_impacts": max_impacts,
+                "max_steps": max_steps, "zeno_window": zeno_window, "zeno_rtol": zeno_rtol,
+                "parameters": dict(values), **engine.settings()}
+    return run.result(settings, wall0)
+
+
+def _validate(automaton, model, values, x0, t0, t_end, mode, min_dwell, max_impacts, max_steps, zeno_window,
+              zeno_rtol):
+    """Check every setting and the initial state before a backend is built: (t0, t_end, state, mode)."""
     t0, t_end = _check_time(t0, t_end)
     state = finite_array(x0, "the initial state x0")
     names = [s.name for s in automaton.states]
@@ -221,7 +236,11 @@ def simulate_orbit(
     if not (isinstance(zeno_rtol, (int, float)) and math.isfinite(zeno_rtol) and zeno_rtol >= 0):
         raise ParameterError(f"zeno_rtol={zeno_rtol!r} must be a finite relative spread >= 0, e.g. 1e-3")
     _check_inside(automaton, model, state, mode, values)
+    return t0, t_end, state, mode
 
+
+def _make_engine(backend, automaton, values, **options) -> OrbitBackend:
+    """The backend instance for a registered name or an OrbitBackend subclass."""
     if isinstance(backend, str):
         if backend not in BACKENDS:
             raise ParameterError(f"unknown backend {backend!r}; use one of {sorted(BACKENDS)}")
@@ -230,115 +249,129 @@ def simulate_orbit(
         backend_cls = backend
     else:
         raise ParameterError(f"backend must be a name in {sorted(BACKENDS)} or an OrbitBackend subclass")
-    engine = backend_cls(automaton, values, rtol=rtol, atol=atol, dense=dense, **options)
+    return backend_cls(automaton, values, **options)
 
-    pnames = list(automaton.parameters)
-    pvalues = [values[p] for p in pnames]
-    resets = {}
-    for tr in automaton.transitions:
-        resets[tr.name] = (to_callable(tr.reset, automaton.states, pnames) if tr.symbolic_reset else tr.reset)
-    obs_names = list(automaton.observables)
-    observe = to_callable([automaton.observables[k] for k in obs_names], automaton.states, pnames) if obs_names \
-        else (lambda s, p: ())
-    zeno = ZenoDetector(int(zeno_window), float(zeno_rtol)) if zeno_window else None
 
-    rows_t, rows_tr, rows_src, rows_tgt, before, after, ob_before, ob_after = [], [], [], [], [], [], [], []
-    engine.start(t0, state, mode)
-    status, message, zeno_time, n_steps = "ok", f"reached t_end={t_end:g}", None, 0
-    t_last = -math.inf
-    t = t0
-    while True:
-        step = engine.advance(t_end, max_steps - n_steps)
-        n_steps += step.steps
-        t, state = step.t, step.state
-        if step.failed:
-            status, message = "failed", step.failed
-            break
-        if step.outside:
-            status, message = "left_admissible_set", step.outside
-            break
-        if step.step_limit:
-            status = "max_steps"
-            message = (f"stopped after max_steps={max_steps} integration steps at t={t:.12g} before t_end={t_end:g}; "
-                       "raise max_steps (or shorten t_end) to go on")
-            break
-        if step.fired is None:
-            break
-        tr = automaton.transitions[step.fired]
+class _EventLoop:
+    """Integrate to the next transition, apply its reset, log it, apply the stop rules; then build the result."""
+
+    def __init__(self, automaton, values, model, engine, zeno, dense):
+        self.automaton, self.values, self.model, self.engine = automaton, values, model, engine
+        self.zeno, self.dense = zeno, dense
+        self.pnames = list(automaton.parameters)
+        self.pvalues = [values[p] for p in self.pnames]
+        self.resets = {tr.name: (to_callable(tr.reset, automaton.states, self.pnames) if tr.symbolic_reset
+                                 else tr.reset) for tr in automaton.transitions}
+        self.obs_names = list(automaton.observables)
+        self.observe = (to_callable([automaton.observables[k] for k in self.obs_names], automaton.states,
+                                    self.pnames) if self.obs_names else (lambda s, p: ()))
+        self.rows = {k: [] for k in ("t", "transition", "source", "target", "before", "after", "ob_before",
+                                     "ob_after")}
+        self.status, self.message, self.zeno_time, self.n_steps = "ok", "", None, 0
+        self.t, self.state, self.mode = math.nan, None, None
+
+    def run(self, t0, t_end, state, mode, *, min_dwell, max_impacts, max_steps) -> None:
+        engine, rows = self.engine, self.rows
+        engine.start(t0, state, mode)
+        self.message = f"reached t_end={t_end:g}"
+        t_last, t = -math.inf, t0
+        while True:
+            step = engine.advance(t_end, max_steps - self.n_steps)
+            self.n_steps += step.steps
+            t, state = step.t, step.state
+            self.t, self.state, self.mode = t, state, mode
+            if step.failed:
+                self.status, self.message = "failed", step.failed
+                return
+            if step.outside:
+                self.status, self.message = "left_admissible_set", step.outside
+                return
+            if step.step_limit:
+                self.status = "max_steps"
+                self.message = (f"stopped after max_steps={max_steps} integration steps at t={t:.12g} before "
+                                f"t_end={t_end:g}; raise max_steps (or shorten t_end) to go on")
+                return
+            if step.fired is None:
+                return
+            tr = self.automaton.transitions[step.fired]
+            new = self._reset(tr, t, state)
+            if new.shape != state.shape or not np.all(np.isfinite(new)):
+                self.status = "failed"
+                self.message = f"reset of transition {tr.name!r} at t={t:.17g} gave {new} from {state}"
+                return
+            if self.model is not None:
+                _check_coefficient(self.model, t, state, new)
+            for key, value in (("t", t), ("transition", tr.name), ("source", tr.source), ("target", tr.target),
+                               ("before", state), ("after", new), ("ob_before", self.observe(state, self.pvalues)),
+                               ("ob_after", self.observe(new, self.pvalues))):
+                rows[key].append(value)
+            state, mode = new, tr.target
+            self.state, self.mode = state, mode
+            if self.dense:
+                engine.samples.append((t, new.copy(), mode))
+            dt, t_last = t - t_last, t
+            if self.zeno is not None:
+                predicted = self.zeno.add(t)
+                if predicted is not None and predicted <= t_end:
+                    self.status, self.zeno_time = "zeno", predicted
+                    self.message = (f"Zeno: transition times accumulate geometrically (ratio {self.zeno.ratio:.6g}) "
+                                    f"at t = {predicted:.12g}; stopped after {len(rows['t'])} transitions at "
+                                    f"t = {t:.12g}")
+                    return
+            if dt < min_dwell:
+                self.status = "chattering"
+                self.message = (f"two transitions {dt:.3g} apart at t={t:.12g} (< min_dwell={min_dwell:g}): "
+                                "chattering or a grazing sequence; stopped")
+                return
+            if len(rows["t"]) >= max_impacts:
+                self.status = "max_impacts"
+                self.message = f"stopped after max_impacts={max_impacts} transitions at t={t:.12g}"
+                return
+            engine.restart(t, state, mode, step.fired)
+
+    def _reset(self, tr, t, state) -> np.ndarray:
         try:
             if tr.symbolic_reset:
-                new = np.array(resets[tr.name](state, pvalues), dtype=float)
-            else:
-                new = np.asarray(resets[tr.name](state.copy(), dict(values)), dtype=float)
+                return np.array(self.resets[tr.name](state, self.pvalues), dtype=float)
+            return np.asarray(self.resets[tr.name](state.copy(), dict(self.values)), dtype=float)
         except VibroError:
             raise
         except Exception as exc:  # a user reset or restitution callable that fails: one line, with where
             raise ModelError(f"the reset of transition {tr.name!r} failed at t={t:.12g}, state {state.tolist()} "
                              f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from exc
-        if new.shape != state.shape or not np.all(np.isfinite(new)):
-            status = "failed"
-            message = f"reset of transition {tr.name!r} at t={t:.17g} gave {new} from {state}"
-            break
-        if model is not None:
-            _check_coefficient(model, t, state, new)
-        rows_t.append(t)
-        rows_tr.append(tr.name)
-        rows_src.append(tr.source)
-        rows_tgt.append(tr.target)
-        before.append(state)
-        after.append(new)
-        ob_before.append(observe(state, pvalues))
-        ob_after.append(observe(new, pvalues))
-        state, mode = new, tr.target
-        if dense:
-            engine.samples.append((t, new.copy(), mode))
-        dt = t - t_last
-        t_last = t
-        if zeno is not None:
-            predicted = zeno.add(t)
-            if predicted is not None and predicted <= t_end:
-                status, zeno_time = "zeno", predicted
-                message = (f"Zeno: transition times accumulate geometrically (ratio {zeno.ratio:.6g}) at "
-                           f"t = {predicted:.12g}; stopped after {len(rows_t)} transitions at t = {t:.12g}")
-                break
-        if dt < min_dwell:
-            status = "chattering"
-            message = (f"two transitions {dt:.3g} apart at t={t:.12g} (< min_dwell={min_dwell:g}): chattering or "
-                       "a grazing sequence; stopped")
-            break
-        if len(rows_t) >= max_impacts:
-            status, message = "max_impacts", f"stopped after max_impacts={max_impacts} transitions at t={t:.12g}"
-            break
-        engine.restart(t, state, mode, step.fired)
 
-    d = len(names)
-    log = ImpactLog(
-        t=np.array(rows_t, dtype=float), transition=np.array(rows_tr, dtype=object),
-        source=np.array(rows_src, dtype=object), target=np.array(rows_tgt, dtype=object),
-        before=np.array(before, dtype=float).reshape(-1, d), after=np.array(after, dtype=float).reshape(-1, d),
-        observables_before={k: np.array([o[i] for o in ob_before], dtype=float) for i, k in enumerate(obs_names)},
-        observables_after={k: np.array([o[i] for o in ob_after], dtype=float) for i, k in enumerate(obs_names)},
-        state_names=tuple(names), oscillator=model is not None,
-    )
-    if model is not None and "H" not in log.observables_before and len(log):
-        # G has no closed form: the model's numerical energy (quadrature) fills the H columns
-        log.observables_before["H"] = np.asarray(model.energy(log.before[:, 0], log.before[:, 1]), dtype=float)
-        log.observables_after["H"] = np.asarray(model.energy(log.after[:, 0], log.after[:, 1]), dtype=float)
-    trajectory = None
-    if dense:
-        trajectory = Trajectory(
-            t=np.array([s[0] for s in engine.samples], dtype=float),
-            y=np.array([s[1] for s in engine.samples], dtype=float).reshape(-1, d),
-            mode=np.array([s[2] for s in engine.samples], dtype=object), state_names=tuple(names),
+    def result(self, settings: dict, wall0: float) -> OrbitResult:
+        rows, model, engine = self.rows, self.model, self.engine
+        names = [s.name for s in self.automaton.states]
+        d = len(names)
+        log = ImpactLog(
+            t=np.array(rows["t"], dtype=float), transition=np.array(rows["transition"], dtype=object),
+            source=np.array(rows["source"], dtype=object), target=np.array(rows["target"], dtype=object),
+            before=np.array(rows["before"], dtype=float).reshape(-1, d),
+            after=np.array(rows["after"], dtype=float).reshape(-1, d),
+            observables_before={k: np.array([o[i] for o in rows["ob_before"]], dtype=float)
+                                for i, k in enumerate(self.obs_names)},
+            observables_after={k: np.array([o[i] for o in rows["ob_after"]], dtype=float)
+                               for i, k in enumerate(self.obs_names)},
+            state_names=tuple(names), oscillator=model is not None,
         )
-    settings = {"backend": engine.name, "t0": t0, "t_end": t_end, "min_dwell": min_dwell, "max_impacts": max_impacts,
-                "max_steps": max_steps,
-                "zeno_window": zeno_window, "zeno_rtol": zeno_rtol, "parameters": dict(values), **engine.settings()}
-    if model is not None:
-        settings["restitution"] = model.restitution.spec()
-        settings["model"] = model.name
-    return OrbitResult(
-        status=status, message=message, t=float(t), state=np.array(state, dtype=float), mode=mode, impacts=log,
-        n_steps=n_steps, n_impacts=len(rows_t), zeno_time=zeno_time, trajectory=trajectory, backend=engine.name,
-        settings=settings, compile_time=engine.compile_time, wall_time=time.perf_counter() - wall0,
-    )
+        if model is not None and "H" not in log.observables_before and len(log):
+            # G has no closed form: the model's numerical energy (quadrature) fills the H columns
+            log.observables_before["H"] = np.asarray(model.energy(log.before[:, 0], log.before[:, 1]), dtype=float)
+            log.observables_after["H"] = np.asarray(model.energy(log.after[:, 0], log.after[:, 1]), dtype=float)
+        trajectory = None
+        if self.dense:
+            trajectory = Trajectory(
+                t=np.array([s[0] for s in engine.samples], dtype=float),
+                y=np.array([s[1] for s in engine.samples], dtype=float).reshape(-1, d),
+                mode=np.array([s[2] for s in engine.samples], dtype=object), state_names=tuple(names),
+            )
+        if model is not None:
+            settings["restitution"] = model.restitution.spec()
+            settings["model"] = model.name
+        return OrbitResult(
+            status=self.status, message=self.message, t=float(self.t), state=np.array(self.state, dtype=float),
+            mode=self.mode, impacts=log, n_steps=self.n_steps, n_impacts=len(rows["t"]), zeno_time=self.zeno_time,
+            trajectory=trajectory, backend=engine.name, settings=settings, compile_time=engine.compile_time,
+            wall_time=time.perf_counter() - wall0,
+        )

@@ -19,6 +19,8 @@ How it works:
 * ``_rng``: xoshiro256** and a 256-layer ziggurat, one stream per chunk from ``SeedSequence(seed).spawn``.
 * ``_statistics``: integer histograms (H, (x, y), impact speeds) and one row of counts and sums per chunk; estimates
   are ratios of ``math.fsum`` sums with batch-means (per-chunk) 95 % intervals.
+* ``_problem``: :class:`EnsembleProblem` (what), :class:`MonteCarloAlgorithm` (how) and :class:`Execution`
+  (where, how much), the argument groups of :func:`solve_ensemble`; :func:`simulate_ensemble` takes them flat.
 * ``_runner``: chunks of paths run on ``numba.get_num_threads()`` threads (a ``nogil`` kernel; each call interleaves
   8 paths so that their dependency chains overlap) or on Dask; checkpoints and resume. A ``prange`` kernel gave the
   same numbers but doubled the compile time (about 18 s instead of 7 s cold), hence the thread pool.
@@ -33,6 +35,7 @@ Examples
 """
 
 from ._codegen import Kernel, build_kernel, cache_dir, generate_source
+from ._problem import EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._rng import chunk_states, normals, ziggurat_tables
 from ._runner import (
     ChatteringWarning,
@@ -42,17 +45,19 @@ from ._runner import (
     drive_paths,
     sample_paths,
     simulate_ensemble,
+    solve_ensemble,
     speed_scale,
 )
 from ._schemes import SCHEMES, EulerMaruyama, Milstein, NaiveFlip, Scheme, Splitting, get_scheme
 from ._statistics import EnsembleStatistics, Estimate, atomic_write_text, ratio_estimate
 
 __all__ = [
-    "SCHEMES", "ChatteringWarning", "EnsembleStatistics", "Estimate", "EulerMaruyama", "Kernel", "Milstein",
+    "SCHEMES", "ChatteringWarning", "EnsembleProblem", "EnsembleStatistics", "Estimate", "EulerMaruyama", "Execution",
+    "Kernel", "Milstein", "MonteCarloAlgorithm",
     "NaiveFlip", "Scheme",
     "Splitting", "StepSizeWarning", "atomic_write_text", "build_kernel", "cache_dir", "check_step", "chunk_states",
     "default_chunk_paths", "drive_paths", "generate_source", "get_scheme", "normals", "ratio_estimate",
-    "sample_paths", "simulate_ensemble", "speed_scale", "ziggurat_tables",
+    "sample_paths", "simulate_ensemble", "solve_ensemble", "speed_scale", "ziggurat_tables",
 ]
 
 # Monte Carlo of any hybrid automaton with noise (n states, modes, guards, resets)

@@ -22,7 +22,7 @@ import sympy as sp
 from hybrid.errors import ModelError, ParameterError
 
 from . import _auto_codegen, _codegen, _rng
-from ._runner import MAX_PATH_STEPS, ChatteringWarning
+from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, check_chunk_count
 from ._statistics import Estimate, ratio_estimate
 
 COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside")
@@ -232,7 +232,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                        observables: dict | None = None, histograms: dict | None = None, joint=None,
                        speed_range: tuple = (0.0, 10.0, 100), stride: int = 1, chunk_paths: int = 8,
                        threads: int | None = None, convention: str = "stratonovich",
-                       max_path_steps: float = MAX_PATH_STEPS) -> AutomatonEnsemble:
+                       max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True) -> AutomatonEnsemble:
     """Monte Carlo ensemble of a hybrid automaton with noise, crossings located inside the step.
 
     Parameters
@@ -272,6 +272,10 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         How the modes' noise is meant (physical white noise: Stratonovich, with the Wong-Zakai drift).
     max_path_steps : float
         Refuse requests larger than this many path-steps.
+    check_dt : bool
+        Apply the step rule of :func:`guard_step_rule`: a pilot (a copy of chunk 0's stream, 2 % of the steps,
+        at least 2000) refuses a ``dt`` with which one step moves a guard across half of the range that guard
+        spans along the paths; the run itself warns above a tenth. ``settings['step_rule']`` keeps the figures.
 
     Returns
     -------
@@ -313,6 +317,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
             f"the request is {work:.3g} path-steps (paths x (t_end / dt)), above the limit {max_path_steps:.3g}; "
             "reduce paths or t_end, raise dt, or pass a larger max_path_steps"
         )
+    check_chunk_count(paths, chunk_paths)  # before compiling: each chunk spawns its own stream
     values = automaton.resolve_parameters(params)
     n = len(automaton.states)
     try:
@@ -394,11 +399,29 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     dummy_joint = np.zeros((1, 1), dtype=np.int64)
     mode_index = mode_names.index(mode0)
 
+    gstat = np.zeros((n_chunks, max(n_tr, 1), 4))
+    gstat[:, :, 2], gstat[:, :, 3] = np.inf, -np.inf
+
+    def call(rng_state, k, burn, samples, out):
+        hist_k, jhist_k, vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k = out
+        module.run_chunk(rng_state, npaths[k], burn, samples, stride, dt, 0.0, x0, mode_index, p, zx, zk, zf,
+                         sch.code, obs_lo, obs_scale, obs_bins, hist_k, jx, jy, j_lo, j_scale, j_bins, jhist_k,
+                         v_scale, int(v_bins), vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k)
+
     def run(k):
-        module.run_chunk(states[k], npaths[k], n_burn, n_samp, stride, dt, 0.0, x0, mode_index, p, zx, zk, zf,
-                         sch.code, obs_lo, obs_scale, obs_bins, hist[k], jx, jy, j_lo, j_scale, j_bins,
-                         jhist[k] if jhist is not None else dummy_joint, v_scale, int(v_bins), vhist[k], counts[k],
-                         sums[k], sumsq[k], events[k])
+        call(states[k], k, n_burn, n_samp, (hist[k], jhist[k] if jhist is not None else dummy_joint, vhist[k],
+                                           counts[k], sums[k], sumsq[k], events[k], gstat[k]))
+
+    step_rule = None
+    if check_dt and n_tr:
+        # a pilot on a copy of chunk 0's stream (the run's numbers do not change): refuse before the work
+        n_steps = n_burn + n_samp * stride
+        pilot_steps = min(n_steps, max(2000, n_steps // 50))
+        g_pilot = gstat[:1].copy()
+        call(states[0].copy(), 0, pilot_steps, 0, (np.zeros_like(hist[0]), dummy_joint, np.zeros_like(vhist[0]),
+                                                  np.zeros_like(counts[0]), np.zeros_like(sums[0]),
+                                                  np.zeros_like(sumsq[0]), np.zeros_like(events[0]), g_pilot[0]))
+        step_rule = guard_step_rule(g_pilot[0], [t.name for t in st.transitions], dt, refuse=True, warn=False)
 
     workers = threads or os.cpu_count() or 1
     if workers == 1 or n_chunks == 1:
@@ -408,6 +431,10 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         with ThreadPoolExecutor(max_workers=min(workers, n_chunks)) as pool:
             list(pool.map(run, range(n_chunks)))  # each chunk writes its own rows: order-independent
 
+    if n_tr:
+        whole = np.concatenate([gstat[:, :, :2].sum(axis=0), gstat[:, :, 2:3].min(axis=0),
+                                gstat[:, :, 3:4].max(axis=0)], axis=1)
+        step_rule = guard_step_rule(whole, [t.name for t in st.transitions], dt, refuse=False, warn=check_dt)
     flags = {nm: int(counts[:, i].sum()) for i, nm in enumerate(COUNT_NAMES)}
     edges = {nm: np.linspace(lo[i], lo[i] + bins[i] / scale[i], bins[i] + 1) for i, nm in enumerate(names)}
     hsum = hist.sum(axis=0)
@@ -420,7 +447,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 + repr([t.name for t in st.transitions]) + _auto_codegen.source_hash(src),
                 "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end, "t_burn": t_burn, "stride": stride,
                 "seed": seed, "chunk_paths": chunk_paths, "histograms": dict(histograms), "joint": joint,
-                "params": values, "convention": convention, "orders": sch.orders(st)}
+                "params": values, "convention": convention, "orders": sch.orders(st), "step_rule": step_rule}
     ens = AutomatonEnsemble(
         names, edges, cts, jres, tuple(t.name for t in st.transitions), events.sum(axis=0)[:n_tr],
         np.linspace(0.0, float(v_hi), int(v_bins) + 1), vhist.sum(axis=0)[:n_tr], sums[:, : len(names)],
@@ -429,6 +456,75 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     )
     _warn(ens)
     return ens
+
+
+STEP_REFUSE = 0.5
+"""Refuse a step that moves a guard (4 x its rms change per step) by more than this share of the guard's span."""
+STEP_WARN = 0.1
+"""Warn above this share (the oscillator rule's speed * dt / gap thresholds, carried to any guard)."""
+
+
+def guard_step_rule(gstat: np.ndarray, names, dt: float, *, refuse: bool, warn: bool = True) -> dict:
+    """The step rule for any guard: how far one step moves it, against the range it spans along the paths.
+
+    For each transition j, ``move = 4 * rms(g(x_{n+1}) - g(x_n))`` over the steps tried in its source mode and
+    ``span = max g - min g`` over the states those steps started from. For a wall ``x = delta`` this is the
+    oscillator's rule: 4 x the typical speed times dt, against the gap. ``move / span`` above
+    :data:`STEP_REFUSE` raises :class:`~hybrid.errors.StepSizeError` (if ``refuse``); above :data:`STEP_WARN`
+    gives a :class:`StepSizeWarning` (if ``warn``).
+
+    Parameters
+    ----------
+    gstat : (n_trans, 4) array
+        [sum of squared guard changes per step, number of steps, min guard, max guard] (the kernel's ``gstat``).
+    names : sequence of str
+        Transition names.
+    dt : float
+
+    Returns
+    -------
+    dict
+        ``{name: {"move": ..., "span": ..., "ratio": ...}, "worst": name, "ratio": worst ratio}``.
+
+    Examples
+    --------
+    >>> rule = guard_step_rule(np.array([[1e-6, 100.0, -2.0, 0.0]]), ["right"], 0.01, refuse=True)
+    >>> round(rule["ratio"], 6)
+    0.0002
+    """
+    from hybrid.errors import StepSizeError
+
+    from ._runner import StepSizeWarning
+
+    out, worst, worst_ratio = {}, None, 0.0
+    for j, name in enumerate(names):
+        total, steps, g_lo, g_hi = (float(v) for v in gstat[j])
+        if steps < 2 or not (np.isfinite(g_lo) and np.isfinite(g_hi)):
+            continue  # never tried: its mode was not visited
+        move = 4.0 * math.sqrt(total / steps)
+        span = g_hi - g_lo
+        ratio = move / span if span > 0 else (math.inf if move > 0 else 0.0)
+        out[name] = {"move": move, "span": span, "ratio": ratio}
+        if ratio > worst_ratio:
+            worst, worst_ratio = name, ratio
+    out["worst"], out["ratio"] = worst, worst_ratio
+    if worst is None:
+        return out
+    w = out[worst]
+    advice = f"use dt <= {dt * STEP_WARN / worst_ratio:.3g}" if np.isfinite(worst_ratio) else "reduce dt"
+    if refuse and worst_ratio > STEP_REFUSE:
+        raise StepSizeError(
+            f"dt={dt:g} is too large: one step moves the guard of transition {worst!r} by {w['move']:.3g} "
+            f"(4 x rms), {worst_ratio:.2f} of the range {w['span']:.3g} it spans along the paths (limit "
+            f"{STEP_REFUSE}); {advice}"
+        )
+    if warn and worst_ratio > STEP_WARN:
+        warnings.warn(
+            f"dt={dt:g} is coarse: one step moves the guard of {worst!r} by {worst_ratio:.3f} of its span (> "
+            f"{STEP_WARN}); expect a visible discretisation bias ({advice}, or compare with dt / 2)",
+            StepSizeWarning, stacklevel=3,
+        )
+    return out
 
 
 def _warn(ens: AutomatonEnsemble) -> None:
@@ -442,6 +538,14 @@ def _warn(ens: AutomatonEnsemble) -> None:
     if ens.flags["event_overflow"]:
         warnings.warn(f"{ens.flags['event_overflow']} steps hit the cap of {_auto_codegen.MAX_EVENTS} events "
                       "(chattering or a Zeno accumulation inside one step); reduce dt", ChatteringWarning,
+                      stacklevel=3)
+    steps = ens.sampled_time / ens.settings["dt"]
+    fired = float(np.sum(ens.events))
+    if steps and fired / steps > CHATTER_IMPACTS_PER_STEP:
+        # events on the step scale: a path bounces against a guard every few steps, so rates are not resolved
+        warnings.warn(f"chattering: {fired / steps:.3g} transitions per path-step (limit "
+                      f"{CHATTER_IMPACTS_PER_STEP}); rates and guard statistics are not resolved by "
+                      f"dt={ens.settings['dt']:g}; reduce dt until they stop changing", ChatteringWarning,
                       stacklevel=3)
     if ens.flags["nonfinite"]:
         warnings.warn(f"{ens.flags['nonfinite']} observable values were not finite (paths diverged?)", VibroWarning,

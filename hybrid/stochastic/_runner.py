@@ -35,6 +35,7 @@ from hybrid.errors import (
 from hybrid.io import atomic_write
 
 from . import _codegen, _rng
+from ._problem import MAX_MEMORY, MAX_PATH_STEPS, EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
@@ -44,11 +45,8 @@ CHECKPOINT_FORMAT = 2
 
 MIN_CHUNKS_FOR_CI = 8
 """Fewer chunks than this make the batch-means intervals unreliable (a warning says so)."""
-MAX_PATH_STEPS = 1e13
-"""Default refusal threshold of :func:`simulate_ensemble` for paths x steps (about a day on a large node)."""
-
-MAX_MEMORY = 4e9
-"""Default refusal threshold (bytes) of :func:`simulate_ensemble` for the histograms held at once."""
+MAX_CHUNKS = 2**20
+"""Most chunks of a CPU run: each needs its own spawned seed (about 30 s and 32 MB of states per million)."""
 
 OUTSIDE_WARN = 1e-3
 """Share of the samples outside a histogram's range above which :class:`HistogramRangeWarning` is raised."""
@@ -267,6 +265,24 @@ def _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_mem
             f"{nb.get_num_threads() + 3} copies), above the limit {max_memory / 1e9:.3g} GB; lower bins, xy_bins "
             "or v_bins, or raise the limit (max_memory=, --max-memory-gb)"
         )
+
+
+def check_chunk_count(paths: int, chunk_paths: int) -> int:
+    """The number of chunks; refuse more than :data:`MAX_CHUNKS` (each chunk spawns its own random stream).
+
+    Examples
+    --------
+    >>> check_chunk_count(10**6, 8)
+    125000
+    """
+    n_chunks = -(-paths // chunk_paths)
+    if n_chunks > MAX_CHUNKS:
+        raise ParameterError(
+            f"paths={paths} in chunks of {chunk_paths} makes {n_chunks} chunks, above the limit {MAX_CHUNKS} (each "
+            f"spawns its own random stream); pass chunk_paths >= {-(-paths // MAX_CHUNKS)} (the numbers then "
+            "depend on that chunk size, as always)"
+        )
+    return n_chunks
 
 
 def default_chunk_paths(paths: int) -> int:
@@ -574,6 +590,11 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     RestitutionError
         The law gave e outside (0, 1] at an impact, or a callable law raised.
 
+    See Also
+    --------
+    solve_ensemble : the same run from an :class:`EnsembleProblem`, a :class:`MonteCarloAlgorithm` and an
+        :class:`Execution` (this function builds the three from its keywords).
+
     Examples
     --------
     >>> from models import DuffingImpact
@@ -582,30 +603,95 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     >>> s.violations  # doctest: +SKIP
     0
     """
-    sch = get_scheme(scheme)
-    x0 = _as_x0(x0)
-    settings = _settings(model, sch, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride,
-                         chunk_paths, v_bins, v_max, x0, max_path_steps, max_memory)
+    problem = EnsembleProblem(model, x0=x0, t_end=t_end, t_burn=t_burn, h_max=h_max, bins=bins, xy_bins=xy_bins,
+                              xy_range=xy_range, v_bins=v_bins, v_max=v_max, stride=stride)
+    algorithm = MonteCarloAlgorithm(scheme=scheme, dt=dt, check_dt=check_dt, precision=precision)
+    execution = Execution(paths=paths, seed=seed, chunk_paths=chunk_paths, scheduler=scheduler, progress=progress,
+                          checkpoint=checkpoint, resume=resume, checkpoint_every=checkpoint_every,
+                          max_path_steps=max_path_steps, max_memory=max_memory,
+                          threads_per_block=threads_per_block, launch_steps=launch_steps)
+    return solve_ensemble(problem, algorithm, execution)
+
+
+def solve_ensemble(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm | None = None,
+                   execution: Execution | None = None) -> EnsembleStatistics:
+    """Run the ensemble ``problem`` with ``algorithm`` (default Milstein, dt = 1e-3) under ``execution``.
+
+    The three groups are described in :mod:`hybrid.stochastic._problem`; :func:`simulate_ensemble` documents every
+    setting, its checks and its errors.
+
+    Parameters
+    ----------
+    problem : EnsembleProblem
+    algorithm : MonteCarloAlgorithm, optional
+    execution : Execution, optional
+
+    Returns
+    -------
+    EnsembleStatistics
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> problem = EnsembleProblem(DuffingImpact(), t_end=20.0, t_burn=5.0, xy_bins=None)
+    >>> stats = solve_ensemble(problem, MonteCarloAlgorithm("splitting", dt=0.01),
+    ...                        Execution(paths=4))  # doctest: +SKIP
+    >>> stats.violations  # doctest: +SKIP
+    0
+    """
+    algorithm = MonteCarloAlgorithm() if algorithm is None else algorithm
+    execution = Execution() if execution is None else execution
+    for obj, kind in ((problem, EnsembleProblem), (algorithm, MonteCarloAlgorithm), (execution, Execution)):
+        if not isinstance(obj, kind):
+            raise ParameterError(f"expected a {kind.__name__}, got {type(obj).__name__}; build one with "
+                                 f"hybrid.stochastic.{kind.__name__}(...)")
+    model = problem.model
+    sch, settings = _prepare(problem, algorithm, execution)
+    ex = execution
+    if ex.scheduler == "cuda":  # launches, checkpoints and resume of its own (_cuda.py); the result checks are shared
+        from . import _cuda
+
+        stats = _cuda.run_ensemble(model, sch, settings, checkpoint=ex.checkpoint, resume=ex.resume,
+                                   checkpoint_every=int(ex.checkpoint_every), progress=ex.progress,
+                                   precision=algorithm.precision, threads_per_block=ex.threads_per_block,
+                                   launch_steps=ex.launch_steps)
+    else:
+        stats = _run_on_cpu(model, sch, settings, ex)
+    return _check_result(model, stats, settings, algorithm.dt)
+
+
+def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execution):
+    """Validate all three groups before anything is compiled; the scheme and the run's settings record."""
+    pb, model = problem, problem.model
+    sch = get_scheme(algorithm.scheme)
+    x0 = _as_x0(pb.x0)
+    settings = _settings(model, sch, algorithm.dt, ex.paths, pb.t_end, pb.t_burn, ex.seed, pb.h_max, pb.bins,
+                         pb.xy_bins, pb.xy_range, pb.stride, ex.chunk_paths, pb.v_bins, pb.v_max, x0,
+                         ex.max_path_steps, ex.max_memory)
     _check_noise(model, settings["h_max"])
-    if check_dt:
-        settings["step_rule"] = check_step(model, dt, h_max, sch)
+    if algorithm.check_dt:
+        settings["step_rule"] = check_step(model, algorithm.dt, pb.h_max, sch)
+    scheduler = ex.scheduler
     local = scheduler in (None, "threads", "local")
     gpu = isinstance(scheduler, str) and scheduler == "cuda"
     if not (local or gpu or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")
             or hasattr(scheduler, "submit")):  # before compiling: a typo must not cost a kernel build
         raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS, cuda or a Client")
-    if precision != "f64" and not gpu:
-        raise ParameterError(f"precision={precision!r} needs scheduler='cuda' (the CPU kernels are double only)")
-    if resume and checkpoint is None:
+    if not gpu:
+        check_chunk_count(settings["paths"], settings["chunk_paths"])
+    if algorithm.precision != "f64" and not gpu:
+        raise ParameterError(f"precision={algorithm.precision!r} needs scheduler='cuda' (the CPU kernels are "
+                             "double only)")
+    if ex.resume and ex.checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
-    checkpoint_every = _positive_int("checkpoint_every", checkpoint_every)
-    if gpu:  # launches, checkpoints and resume of its own (_cuda.py); the result checks below are shared
-        from . import _cuda
+    _positive_int("checkpoint_every", ex.checkpoint_every)
+    return sch, settings
 
-        stats = _cuda.run_ensemble(model, sch, settings, checkpoint=checkpoint, resume=resume,
-                                   checkpoint_every=checkpoint_every, progress=progress, precision=precision,
-                                   threads_per_block=threads_per_block, launch_steps=launch_steps)
-        return _check_result(model, stats, settings, dt)
+
+def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics:
+    """Chunks on local threads or Dask, with checkpoints: the statistics before the result checks."""
+    checkpoint, resume, checkpoint_every = ex.checkpoint, ex.resume, int(ex.checkpoint_every)
+    local = ex.scheduler in (None, "threads", "local")
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if ckdir is not None:
         _check_checkpoint_dir(ckdir)
@@ -634,7 +720,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     pending = [k for k in range(settings["n_chunks"]) if k not in done]
 
     bar = None
-    if progress:
+    if ex.progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=settings["n_chunks"], initial=stats.done_chunks, unit="chunk", desc=f"mc {sch.name}")
@@ -671,7 +757,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
             flush()
 
     try:
-        _run_chunks(job, kern, pending, states, local, scheduler, accept, flush, ckdir, stats)
+        _run_chunks(job, kern, pending, states, local, ex.scheduler, accept, flush, ckdir, stats)
     except VibroError:
         raise
     except Exception as exc:  # raised inside the kernel (a callable law, a math domain error): one line
@@ -682,7 +768,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     stats.wall_time = wall0 + time.perf_counter() - t_start
     if ckdir is not None:
         _write_checkpoint(ckdir, stats)
-    return _check_result(model, stats, settings, dt)
+    return stats
 
 
 def _check_result(model, stats: EnsembleStatistics, settings: dict, dt: float) -> EnsembleStatistics:

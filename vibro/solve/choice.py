@@ -11,6 +11,12 @@
 4. **fpk**, the phase-plane solver of the full problem, when its measured floor meets the tolerance;
 5. **Monte Carlo** otherwise, planned by :mod:`vibro.solve.planner`.
 
+The error model was fitted on symmetric gaps. For other walls (one-sided, asymmetric, a wall at the equilibrium)
+its predictions for paper and jump are NaN (not measured): the chooser does not pick them there and says so in the
+reason (``exact`` still holds: the elastic Gibbs density does not depend on where the walls are; ``fpk`` is rated
+where its floor was measured, :data:`~vibro.solve.errormodel.FPK_GEOMETRIES`). Forcing an unrated method warns
+with :class:`UnmeasuredAccuracyWarning`.
+
 The predicted error of each averaging method is the error model of :mod:`vibro.solve.errormodel`. Averaging is
 refused when the 90th-percentile energy level loses more than ``MAX_DAMPING_RATIO`` of its energy per cycle to the
 damping force, or more than ``MAX_IMPACT_RATIO`` to impacts: the quasi-conservative assumption is broken there.
@@ -22,11 +28,15 @@ import math
 import warnings
 from dataclasses import dataclass
 
-from hybrid.errors import ModelError, ParameterError
+from hybrid.errors import ModelError, ParameterError, VibroWarning
 
 from .diagnostics import Diagnostics, diagnose
 from .errormodel import MAX_DAMPING_RATIO, MAX_IMPACT_RATIO, error_model, predict_averaging_error
 from .planner import plan_monte_carlo
+
+
+class UnmeasuredAccuracyWarning(VibroWarning):
+    """An averaging density is asked for on a geometry where its error has not been measured."""
 
 
 @dataclass
@@ -57,8 +67,9 @@ class Choice:
 
     def summary(self) -> str:
         """Human-readable lines: method, why, expected error and cost."""
+        err = "not measured for this geometry" if math.isnan(self.expected_error) else f"{self.expected_error:.3g}"
         s = [f"method: {self.method}", f"why: {self.reason}",
-             f"expected L1 error of p(H): {self.expected_error:.3g}", f"expected cost: {self.expected_cost:.3g} s"]
+             f"expected L1 error of p(H): {err}", f"expected cost: {self.expected_cost:.3g} s"]
         if self.settings:
             s.append("settings: " + ", ".join(f"{k}={v}" for k, v in self.settings.items()))
         return "\n".join(s)
@@ -129,7 +140,11 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
                       preds["exact"], averaging_cost(), {}, preds, diag)
     if refusal:
         reasons.append(refusal)
-    if not refusal:
+    unmeasured = math.isnan(preds["paper"])
+    if unmeasured and not refusal:
+        reasons.append(f"{diag.geometry} walls: the averaging error model has no data for this geometry (fitted on "
+                       "symmetric gaps), so no accuracy of paper or jump is claimed and neither is chosen")
+    if not refusal and not unmeasured:
         for name in ("paper", "jump"):  # cheapest first
             if preds[name] <= tol:
                 why = (f"energy lost per cycle is small (impacts {diag.r_imp:.3f} H, damping {diag.r_damp:.3f} H "
@@ -142,9 +157,10 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
             f"jump {preds['jump']:.3f})"
         )
     # the phase-plane solver of the full (x, y) problem: accurate to its measured floor, about a second; offered
-    # only where that floor was measured (the paper's quasi-conservative cases), not where averaging is refused
+    # only where that floor was measured (the paper's quasi-conservative cases and the equilibrium wall), not where
+    # averaging is refused
     preds["fpk"] = math.inf if refusal else predict_averaging_error("fpk", diag)
-    if preds["fpk"] <= tol:
+    if preds["fpk"] <= tol:  # False for NaN (not measured)
         why = "; ".join(reasons) + "; the phase-plane FPK solver (impacts as boundary conditions) reaches it"
         return Choice("fpk", why, preds["fpk"], error_model()["fpk"]["cost_s"], {}, preds, diag)
     return mc_choice(model, tol, diag, "; ".join(reasons), preds, max_cost, mc_pilot, seed)

@@ -51,6 +51,7 @@ class Diagnostics:
     h_max : float
         Energy above which the stationary mass is below 1e-5.
     barrier_energy : float
+        The lowest impact level (G(delta) for a symmetric gap, 0 for a wall at the equilibrium).
     notes : list of str
     relaxation_time : float
         1 / E_p[(damping work + impact loss) / (T H)]: how long the energy takes to forget its start (sets the
@@ -58,6 +59,9 @@ class Diagnostics:
     self_excited : bool
         The damping force feeds energy in somewhere (h * y < 0, e.g. van der Pol): outside the domain where the
         averaging error model was calibrated.
+    geometry : str
+        The barrier geometry (:func:`barrier_geometry`); only those in :data:`CALIBRATED_GEOMETRIES` have fitted
+        error models.
     """
 
     linear_damping: bool
@@ -74,13 +78,41 @@ class Diagnostics:
     notes: list = field(default_factory=list)
     relaxation_time: float = math.nan
     self_excited: bool = False
+    geometry: str = "symmetric"
+
+
+CALIBRATED_GEOMETRIES = ("none", "symmetric")
+"""Geometries on which the averaging error model was fitted (the paper's symmetric gaps)."""
+GEOMETRIES = ("none", "symmetric", "one-sided", "asymmetric", "equilibrium")
+"""Barrier geometries the diagnosis tells apart (see :func:`barrier_geometry`)."""
+
+
+def barrier_geometry(model) -> str:
+    """``none``, ``symmetric`` (G(left) = G(right)), ``one-sided`` (a stop at an offset), ``asymmetric`` (two walls
+    at different energies) or ``equilibrium`` (a wall at x = 0, hit by every orbit).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact, ImpactOscillator
+    >>> stop = ImpactOscillator("x", parameters={"D": 0.1}, barriers=(0, None))
+    >>> barrier_geometry(DuffingImpact()), barrier_geometry(stop)
+    ('symmetric', 'equilibrium')
+    """
+    from averaging.quadrature import geometry
+
+    geo = geometry(model)
+    if not geo.has_barriers:
+        return "none"
+    if geo.G_delta == 0.0:
+        return "equilibrium"
+    if geo.walls == 1:
+        return "one-sided"
+    return "symmetric" if geo.symmetric else "asymmetric"
 
 
 def _check_averagable(model) -> None:
-    """The energy-envelope methods need one confining single well and symmetric barriers."""
+    """The energy-envelope methods need one confining single well (any walls)."""
     model.check_single_well()
-    if model.has_barriers:
-        _ = model.barrier_energy  # raises ModelError for asymmetric barriers
 
 
 
@@ -90,7 +122,8 @@ def cycle_quantities(model, H):
 
     A diagnostic, on the orbit nodes of :class:`averaging.quadrature.OrbitNodes` (no turning-point singularity,
     accurate as H -> G(delta)+). The impact loss per quasi-period is (1 - e1**2 e2**2)(H - G(delta)) with
-    e2 = e(e1 v) (the exact two-impact loss of docs/paper-readings.md).
+    e2 = e(e1 v) (the exact two-impact loss of docs/paper-readings.md) for a symmetric gap, one impact's loss for a
+    single wall, and the two impacts in sequence at their own levels for asymmetric walls.
 
     Parameters
     ----------
@@ -110,24 +143,21 @@ def cycle_quantities(model, H):
     >>> round(float(T[0]), 9), round(float(W[0]), 9), float(loss[0])   # T = 2 pi, W = c * pi * A**2
     (6.283185307, 0.314159265, 0.0)
     """
-    from averaging.quadrature import OrbitNodes
+    from averaging.methods import METHODS
+    from averaging.quadrature import OrbitNodes, geometry
     from models import X, Y
 
     H = np.atleast_1d(np.asarray(H, dtype=float))
     h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
-    Gd = model.barrier_energy if model.has_barriers else np.inf
     orbit = OrbitNodes(model, H)  # the averaging's singularity-free nodes (int w/s dx over the level)
     x, s = orbit.x, orbit.s
     hp = np.broadcast_to(np.asarray(h(x, s), dtype=float), x.shape)
     hm = np.broadcast_to(np.asarray(h(x, -s), dtype=float), x.shape)
     W = np.abs(orbit.integral((hp - hm) * s))  # oint h dx: the y > 0 branch forwards, y < 0 backwards
     T = orbit.integral(2.0)
-    loss = np.zeros_like(H)
-    if model.has_barriers:
-        excess = np.maximum(H - Gd, 0.0)
-        one_wall = sum(bool(np.isfinite(b)) for b in model.barriers) == 1
-        law = model.restitution
-        loss = np.asarray(law.impact_loss(excess) if one_wall else law.two_impact_loss(excess), dtype=float)
+    # every wall the level hits, each at its own energy (the free orbit's exact loss over one quasi-period)
+    loss = np.asarray(METHODS["exact-two-impact"].cycle_loss(model.restitution, H, geometry(model).wall_levels),
+                      dtype=float)
     return W, T, loss
 
 
@@ -170,8 +200,8 @@ def _feeds_energy(model, h_top: float) -> bool:
     from models import X, Y
 
     h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
-    right = min(float(model.amplitude(h_top)), model.barriers[1])
-    left = max(-right, model.barriers[0])
+    lo, hi = model.turning_points(h_top)  # clipped to the walls, whichever side they are on
+    left, right = float(lo), float(hi)
     x = np.linspace(left, right, 101)
     y = np.linspace(-math.sqrt(2.0 * h_top), math.sqrt(2.0 * h_top), 101)
     xx, yy = np.meshgrid(x, y)
@@ -227,10 +257,17 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     >>> 0 < d.r_imp < 1, round(d.tail_impact_speed, 3)    # exp(-c V_C**2 / (2 D)) for linear damping
     (True, 0.961)
     """
+    from averaging.quadrature import geometry
+
     _check_averagable(model)
+    notes: list[str] = []
+    kind = barrier_geometry(model)
+    G_low = geometry(model).G_delta  # the lowest impact level (inf without walls)
+    if kind not in CALIBRATED_GEOMETRIES:
+        notes.append(f"{kind} walls: the averaging error model was fitted on symmetric gaps only, so no accuracy is "
+                     "predicted for paper or jump here (see benchmarks/geometry_averaging.py for measured L1)")
     c = model.linear_damping_constant()
     s2 = model.constant_noise_intensity()
-    notes: list[str] = []
     law = model.restitution
     vc = float(law.elastic_below()) if model.has_barriers else math.inf
     elastic = bool(law.is_elastic) or not model.has_barriers
@@ -256,14 +293,19 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
         # flux density of impact speeds: v p(delta, v) dv = p(H) / T(H) dH above G(delta)
         # Rice: the impact-speed flux density at the wall is v p(delta, v), with p(x, y) = p(H)/T(H) (eq. 31)
         from averaging import stationary_density
+        from averaging.quadrature import geometry
 
         sd_el = stationary_density(model.with_restitution(Elastic()), method="paper", h_max=h_el, points=2000)
-        right = model.barriers[1]
-        v = np.linspace(0.0, math.sqrt(2.0 * (h_el - model.barrier_energy)), 4001)
-        flux = v * sd_el.joint(np.array([right]), v)[:, 0]
-        cum = np.concatenate([[0.0], np.cumsum(0.5 * (flux[1:] + flux[:-1]) * np.diff(v))])
-        at_vc = np.interp(vc, v, cum)
-        tail = float((cum[-1] - at_vc) / cum[-1]) if cum[-1] > 0 else 0.0
+        total = above = 0.0
+        for wall, Gw in zip([b for b in model.barriers if np.isfinite(b)], geometry(model).wall_levels):
+            if Gw >= h_el:
+                continue
+            v = np.linspace(0.0, math.sqrt(2.0 * (h_el - Gw)), 4001)
+            flux = v * sd_el.joint(np.array([wall]), v)[:, 0]
+            cum = np.concatenate([[0.0], np.cumsum(0.5 * (flux[1:] + flux[:-1]) * np.diff(v))])
+            total += cum[-1]
+            above += cum[-1] - np.interp(vc, v, cum)
+        tail = float(above / total) if total > 0 else 0.0
     if tail < 1e-4:
         H, p = He, pe
     else:
@@ -294,7 +336,7 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
         linear_damping=c is not None, additive_noise=s2 is not None, elastic_law=elastic, elastic_below=vc,
         tail_impact_speed=float(tail), r_imp=float(r_imp), r_damp=float(r_damp), r_damp_p90=rd90, r_imp_p90=ri90,
         h_max=h_max,
-        barrier_energy=float(model.barrier_energy) if model.has_barriers else math.inf, notes=notes,
-        relaxation_time=float(relax), self_excited=bool(self_excited),
+        barrier_energy=float(G_low), notes=notes,
+        relaxation_time=float(relax), self_excited=bool(self_excited), geometry=kind,
     )
 
