@@ -4,6 +4,8 @@
 * ``exact-two-impact``: the same with dH = (1 - e1**2 e2**2)(H - G(delta)), e1 = e(v), e2 = e(e1 v): the free
   system's loss over two successive impacts (docs/paper-readings.md).
 * ``jump``: no loss drift; every impact is a jump H -> G(delta) + e(v)**2 (H - G(delta)) at rate 2/T(H).
+* ``chain``: the same jump, but at the end of each flight (duration T(H)/walls) instead of at Poisson times: the
+  impact-to-impact chain of :mod:`averaging.chain`.
 
 Other geometries (:meth:`ImpactMethod.cycle_loss`): a level H hits each wall whose energy G_w it exceeds, once per
 quasi-period. One wall (a stop at an offset or at the equilibrium): every method loses (1 - e**2)(H - G_w) per
@@ -30,11 +32,13 @@ class ImpactMethod:
     Examples
     --------
     >>> sorted(METHODS)
-    ['exact-two-impact', 'jump', 'paper']
+    ['chain', 'exact-two-impact', 'jump', 'paper']
     """
 
     name = "base"
     jumps = False
+    flights = False
+    """True when impacts come at the end of flights (the impact-to-impact chain), not at Poisson times."""
     reading = "exact"
     description = ""
 
@@ -183,6 +187,26 @@ class JumpMethod(ImpactMethod):
     description = "jump-diffusion: H -> G_w + e^2 (H - G_w) at rate 1/T(H) for each wall w the level reaches"
 
 
+class ChainMethod(JumpMethod):
+    """The jump of :class:`JumpMethod` applied once per flight of duration T(H)/walls (:mod:`averaging.chain`).
+
+    ``phases`` clock phases per flight, Richardson-extrapolated with phases / 2
+    (:func:`averaging.chain.chain_density`).
+
+    Examples
+    --------
+    >>> from models import Newton
+    >>> m = ChainMethod()
+    >>> m.flights, float(m.jump_target(Newton(0.5), 1.0))
+    (True, 0.25)
+    """
+
+    name = "chain"
+    flights = True
+    phases = 8
+    description = "impact-to-impact chain: H -> G + e^2 (H - G) at the end of each flight T(H)/walls"
+
+
 METHODS: dict[str, ImpactMethod] = {}
 """Registry: method name -> instance."""
 
@@ -199,7 +223,7 @@ def register(method: ImpactMethod) -> ImpactMethod:
     return method
 
 
-for _m in (PaperMethod(), ExactTwoImpactMethod(), JumpMethod()):
+for _m in (PaperMethod(), ExactTwoImpactMethod(), JumpMethod(), ChainMethod()):
     register(_m)
 
 

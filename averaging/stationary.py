@@ -492,7 +492,8 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
         Any model with a single confining well, between any walls: symmetric, asymmetric (G(left) != G(right)),
         one-sided, or a wall at the equilibrium.
     method : str or ImpactMethod
-        ``paper`` (eq. 13 loss as drift), ``exact-two-impact``, or ``jump`` (impacts as jumps).
+        ``paper`` (eq. 13 loss as drift), ``exact-two-impact``, ``jump`` (impacts as jumps at Poisson times), or
+        ``chain`` (the jumps at the end of each flight, :func:`averaging.chain.chain_density`).
     h_max : float
         Upper end of the energy range. Mass above it is discarded (the density is the one conditional on
         H <= h_max): when that is more than :data:`TAIL_WARN` of the total, a
@@ -535,6 +536,10 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     h_max = float(h_max)
     points = int(points)
+    if m.flights:
+        from .chain import chain_density
+
+        return chain_density(model, h_max=h_max, points=points, phases=m.phases, nodes=nodes, check=check)
     law = model.restitution
     try:
         with np.errstate(all="ignore"):

@@ -167,6 +167,7 @@ def transient_density(model, H0: float, times, method="paper", h_max: float = 4.
     True
     """
     m = get_method(method)
+    _refuse_flights(m)
     times = np.asarray(times, dtype=float)
     if times.ndim != 1 or not np.all(np.isfinite(times)) or np.any(times < 0) or np.any(np.diff(times) < 0):
         raise ParameterError("times must be a 1-D increasing array of finite values >= 0")
@@ -213,6 +214,7 @@ def mean_first_passage_time(model, H_c: float, H0=0.0, method="paper", points: i
     True
     """
     m = get_method(method)
+    _refuse_flights(m)
     grid = _energy_grid(H_c, points, "H_c")
     H0a = np.asarray(H0, dtype=float)
     if not np.all((H0a >= 0) & (H0a <= H_c)):  # also refuses NaN
@@ -224,3 +226,9 @@ def mean_first_passage_time(model, H_c: float, H0=0.0, method="paper", points: i
     tau[:n] = splu(-Q[:n, :n].tocsc()).solve(np.ones(n))
     out = np.interp(H0a, grid, tau)
     return float(out) if out.ndim == 0 else out
+
+
+def _refuse_flights(m) -> None:
+    if m.flights:
+        raise ParameterError(f"method {m.name!r} has no transient form here (its flight clock is a stationary "
+                             "construction); use 'jump', 'paper' or 'exact-two-impact'")

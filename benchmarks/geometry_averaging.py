@@ -1,4 +1,5 @@
-"""Averaging on every wall geometry against converged Monte Carlo: L1 of p(H) on 100 bins, E[H], time per method.
+"""Averaging (paper, jump, chain) and fpk on every wall geometry against converged Monte Carlo: L1 of p(H) on 100
+bins, E[H], time per method.
 
 Cases (c = 0.05, D = 0.05 throughout):
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from averaging import quadrature as _quadrature  # noqa: E402
 from averaging import stationary as _stationary  # noqa: E402
 from averaging import stationary_density  # noqa: E402
+from averaging.phase_plane import stationary_density_xy  # noqa: E402
 from hybrid.stochastic import simulate_ensemble  # noqa: E402
 from models import ImpactOscillator, Ma, Newton  # noqa: E402
 from vibro.solve.metrics import bin_masses, l1_masses, rebin_counts  # noqa: E402
@@ -82,8 +85,9 @@ def averaging(model, method, h_max):
 
 def main() -> int:
     rows = []
-    head = (f"{'case':34s} {'MC E[H] (dt/2)':>20s} {'noise':>6s} {'dt bias':>7s} | {'paper':>6s} {'jump':>6s} | "
-            f"{'E paper':>8s} {'E jump':>8s} | {'t paper':>7s} {'t jump':>6s} {'t MC':>6s}")
+    head = (f"{'case':34s} {'MC E[H] (dt/2)':>20s} {'noise':>6s} {'dt bias':>7s} | {'paper':>6s} {'jump':>6s} "
+            f"{'chain':>6s} {'fpk':>6s} | {'E paper':>8s} {'E jump':>8s} {'E chain':>8s} {'E fpk':>8s} | "
+            f"{'t paper':>7s} {'t jump':>6s} {'t chain':>7s} {'t fpk':>6s} {'t MC':>6s}")
     print(head)
     print("-" * len(head))
     for j, (name, model, h_max, x0) in enumerate(CASES):
@@ -91,15 +95,22 @@ def main() -> int:
         ref = monte_carlo(model, h_max, x0, 0.005, 5000 + 10 * j)
         edges = np.linspace(0.0, h_max, BINS + 1)
         res = {}
-        for method in ("paper", "jump"):
+        for method in ("paper", "jump", "chain"):
             sd, wall = averaging(model, method, h_max)
             res[method] = (l1_masses(bin_masses(sd.H, sd.p, edges), ref["masses"]),
                            sd.mean_energy / ref["E"].value - 1.0, wall)
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sd = stationary_density_xy(model, h_max=h_max)
+        res["fpk"] = (l1_masses(sd.bin_masses(edges), ref["masses"]), sd.mean_energy / ref["E"].value - 1.0,
+                      time.perf_counter() - t0)
         bias = l1_masses(mc["masses"], ref["masses"])
         E = ref["E"]
+        ms = ("paper", "jump", "chain", "fpk")
         line = (f"{name:34s} {E.value:9.5f}±{E.ci:.5f}   {ref['noise']:6.4f} {bias:7.4f} | "
-                f"{res['paper'][0]:6.4f} {res['jump'][0]:6.4f} | {res['paper'][1]:+8.2%} {res['jump'][1]:+8.2%} | "
-                f"{res['paper'][2]:6.3f}s {res['jump'][2]:5.3f}s {ref['wall']:5.1f}s")
+                + " ".join(f"{res[m][0]:6.4f}" for m in ms) + " | " + " ".join(f"{res[m][1]:+8.2%}" for m in ms)
+                + " | " + " ".join(f"{res[m][2]:6.3f}s" for m in ms) + f" {ref['wall']:5.1f}s")
         print(line, flush=True)
         rows.append(line)
         if ref["above"] > 1e-4:

@@ -75,15 +75,17 @@ def test_outputs_png_csv_json(outdir, n):
     assert side["figure"] == n and side["status"] == "finished" and side["preset"] == "quick"
     assert set(side["outputs"]) == {f"fig{n:02d}.png", f"fig{n:02d}.csv"}
     methods = set(table["method"])
-    assert methods == {"paper", "jump", "mc"}
+    assert methods == {"paper", "jump", "fpk", "mc"}
+    assert side["methods"]["phase_plane"]["method"] == "fpk"
     for label, case in side["cases"].items():
-        assert set(case["l1_energy"]) == {"paper_vs_mc", "jump_vs_mc", "paper_vs_jump", "mc_noise"}
+        assert set(case["l1_energy"]) == {"paper_vs_mc", "jump_vs_mc", "fpk_vs_mc", "paper_vs_jump", "mc_noise"}
+        assert case["fpk_wall_s"] > 0 and case["fpk"]["mean_energy"] > 0
         assert len(case["mc"]["seeds"]) == 2 and case["mc"]["seeds"][0] != case["mc"]["seeds"][1]
         assert label in set(table["case"])
     if side["kind"] == "joint":
         assert set(table["quantity"]) == {"p(H)", "p(x,y)"}
         (case,) = side["cases"].values()
-        assert set(case["l1_joint"]) == {"paper_vs_mc", "jump_vs_mc", "mc_noise"}
+        assert set(case["l1_joint"]) == {"paper_vs_mc", "jump_vs_mc", "fpk_vs_mc", "mc_noise"}
     else:
         assert set(table["quantity"]) == {"p(H)"}
         assert len(side["cases"]) == 3
@@ -119,7 +121,7 @@ def test_sidecar_energy_l1_recomputed_from_csv(outdir, n):
         width = hi - lo
         # the merged histogram is a density on its own bins
         assert np.sum(p_mc * width) == pytest.approx(1.0, abs=0.02)
-        for method in ("paper", "jump"):
+        for method in ("paper", "jump", "fpk"):
             cur = rows[rows["method"] == method].sort_values("x")
             pa = _bin_mean_of_linear_interpolant(cur["x"].to_numpy(), cur["y"].to_numpy(), lo, hi)
             mine = float(np.sum(np.abs(pa - p_mc) * width))
@@ -138,7 +140,7 @@ def test_sidecar_joint_l1_recomputed_from_csv(outdir):
     mc = joint[joint["method"] == "mc"]
     area = (mc["x_hi"] - mc["x_lo"]).to_numpy() * (mc["y_hi"] - mc["y_lo"]).to_numpy()
     assert np.sum(mc["z"].to_numpy() * area) == pytest.approx(1.0, abs=0.02)
-    for method in ("paper", "jump"):
+    for method in ("paper", "jump", "fpk"):
         grid = joint[joint["method"] == method]
         xs, ys = np.unique(grid["x"]), np.unique(grid["y"])
         z = grid.set_index(["y", "x"])["z"].unstack().loc[ys, xs].to_numpy()

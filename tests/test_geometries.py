@@ -95,7 +95,7 @@ def one_sided_duffing(law, c=0.2, D=0.1, b=0.2, wall=0.5):
                             barriers=(None, "w"), restitution=law)
 
 
-@pytest.mark.parametrize("method", ["paper", "exact-two-impact", "jump"])
+@pytest.mark.parametrize("method", ["paper", "exact-two-impact", "jump", "chain"])
 def test_averaging_on_a_one_sided_elastic_stop_is_the_gibbs_density(method):
     from scipy import integrate
 

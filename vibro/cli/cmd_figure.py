@@ -99,6 +99,7 @@ def _summary(res, wall) -> str:
         l1 = m.get("l1_joint") or m.get("l1_energy")
         if l1:
             parts.append(f"{label}: L1 paper {l1.get('paper_vs_mc', float('nan')):.3f} jump "
-                         f"{l1.get('jump_vs_mc', float('nan')):.3f} noise {l1.get('mc_noise', float('nan')):.3f}")
+                         f"{l1.get('jump_vs_mc', float('nan')):.3f} fpk {l1.get('fpk_vs_mc', float('nan')):.3f} "
+                         f"noise {l1.get('mc_noise', float('nan')):.3f}")
     tail = ("  [" + "; ".join(parts) + "]") if parts else ""
     return f"figure {res.number}: wrote {res.paths['png']} (+csv, json) in {wall:.1f} s{tail}"

@@ -5,7 +5,7 @@
 
 SCHEMES = ("em", "milstein", "naive", "splitting")
 """Names of ``hybrid.stochastic.SCHEMES``."""
-DENSITY_METHODS = ("exact-two-impact", "jump", "paper")
+DENSITY_METHODS = ("chain", "exact-two-impact", "jump", "paper")
 """Names of ``averaging.METHODS``."""
 MODELS = ("duffing", "duffing-forced", "duffing-vdp", "rayleigh")
 """Names of ``models.MODELS``."""

@@ -51,8 +51,9 @@ def render_figure(spec, results, metrics, caption, path, dpi=110) -> None:
     """Draw figure ``spec`` from computed ``results`` into ``path`` (PNG).
 
     Energy figures: left panel linear, right panel log-scale p(H); per case a solid line (paper method), a dashed
-    line (jump method), Monte Carlo symbols and a dotted vertical line at H = G(Δ). Joint figures: filled contours
-    of p(x, y) for the paper method, the jump method and Monte Carlo on one colour scale, barriers at x = ±Δ.
+    line (jump method), a dash-dot line (phase-plane FPK), Monte Carlo symbols and a dotted vertical line at
+    H = G(Δ). Joint figures: filled contours of p(x, y) for the paper method, the jump method, the phase-plane FPK
+    solution and Monte Carlo on one colour scale, barriers at x = ±Δ.
     """
     if spec.kind == "energy":
         _render_energy(spec, results, metrics, caption, path, dpi)
@@ -69,7 +70,7 @@ def _render_energy(spec, results, metrics, caption, path, dpi):
     for i, (res, m) in enumerate(zip(results, metrics)):
         col, mk = COLOURS[i % 3], MARKERS[i % 3]
         for ax in axes:
-            for method, style in (("paper", "-"), ("jump", "--")):
+            for method, style in (("paper", "-"), ("jump", "--"), ("fpk", "-.")):
                 sd = res.densities.get(method)
                 if sd is not None:
                     ax.plot(sd.H, sd.p, style, color=col, lw=1.4,
@@ -113,9 +114,14 @@ def _render_joint(spec, results, metrics, caption, path, dpi):
     xs, ys = np.linspace(x0, x1, JOINT_GRID), np.linspace(y0, y1, JOINT_GRID)
     panels = [("a  analytic, paper method (eq. 31)", xs, ys, np.asarray(res.densities["paper"].joint(xs, ys))),
               ("b  analytic, jump method (eq. 31)", xs, ys, np.asarray(res.densities["jump"].joint(xs, ys)))]
+    if "fpk" in res.densities:
+        # the third-order upwind flux leaves round-off negatives (~1e-10) in the far tail: drawn as 0
+        fpk = np.maximum(np.asarray(res.densities["fpk"].joint(xs, ys)), 0.0)
+        panels.append(("c  phase-plane FPK (no averaging)", xs, ys, fpk))
     if res.mc is not None:
         xe, ye = (np.asarray(e) for e in res.mc.xy_edges)
-        label = "c  Monte Carlo" + ("" if spec.in_paper_mc else " (our addition; not in the paper)")
+        label = f"{'abcd'[len(panels)]}  Monte Carlo" + ("" if spec.in_paper_mc else
+                                                          " (our addition; not in the paper)")
         panels.append((label, xe, ye, mc_xy_density(res.mc)))  # cell edges: drawn as the histogram's cells
     vmax = max(float(np.nanmax(p)) for *_, p in panels)
     levels = np.linspace(0.0, vmax, 16)

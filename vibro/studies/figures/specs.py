@@ -187,11 +187,12 @@ class FigureSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 """Bumped when the outputs change (file shape, or the numbers of the analytic curves), so that older finished
 figures are recomputed; Monte Carlo runs stay reused from their own cache. 4: the jump method's tail near h_max.
 5: fonts of at least 9 pt, labelled colour bars beside the panels; the Monte Carlo cache holds npz + JSON, no
-pickles (old .pkl entries are never loaded, so those runs are redone)."""
+pickles (old .pkl entries are never loaded, so those runs are redone). 6: the phase-plane FPK density (p(H) curve,
+joint panel, L1 distances) beside the averaging methods."""
 
 
 def _sizes(default_paths: int, default_t: float, burn: float, quick_t: float = 60.0, full_factor: int = 8):
