@@ -145,6 +145,7 @@ BAD = [
     (["--model", "duffing", "--filter", "ou", "--param", "D=-1"], "negative"),
     (["--model", "{tmp}/user.py:ou_velocity"], "nothing to histogram"),
     (["--model", "impact_pair", "--range", "z=0:1:10000000", "--max-memory-gb", "0.01"], "GiB"),
+    (["--model", "vibrating_table", "--phases", "4"], "--phases needs a forced oscillator model"),
 ]
 
 

@@ -195,6 +195,10 @@ def run(args, resolved) -> int:
                                  "histograms (--observable, --range)")
     if args.scheduler not in (None, "threads"):
         raise ParameterError(f"--scheduler {args.scheduler}: automaton models run on threads only")
+    if getattr(args, "phases", 0):
+        # an automaton declares no forcing period: sections at a guessed period would be silently wrong
+        raise ParameterError("--phases needs a forced oscillator model (duffing-forced, or forcing= in a model file); "
+                             "for an automaton call simulate_automaton(..., phases=N, period=T) from Python")
     obs, hist = _choose_observables(args, automaton)
     n = len(automaton.states)
     x0 = tuple(args.x0) if args.x0 is not None else (0.0,) * n
