@@ -137,6 +137,58 @@ def test_same_seed_and_chunks_give_the_same_numbers_on_any_thread_count():
     assert np.array_equal(a.counts["H"], b.counts["H"]) and np.array_equal(a.chunk_sums, b.chunk_sums)
 
 
+def test_checkpoint_resume_and_dask_give_the_thread_numbers_bitwise(tmp_path):
+    from hybrid.errors import CheckpointError
+    from hybrid.stochastic import _auto_exec
+
+    kw = dict(dt=0.02, paths=24, t_end=60.0, t_burn=5.0, x0=(0.5, 0.0), seed=8, histograms={"H": (0.0, 4.0, 20)},
+              chunk_paths=3)
+    whole = simulate_automaton(equilibrium_stop_automaton(), "splitting", **kw)
+    ck = tmp_path / "ck"
+    # interrupted after 5 of 8 chunks: the accept callback raises as a Ctrl-C would
+    real = _auto_exec.execute
+
+    def stop_after_five(job, pending, states, accept, **opts):
+        seen = []
+
+        def take(k, out):
+            if len(seen) == 5:
+                raise KeyboardInterrupt
+            seen.append(k)
+            accept(k, out)
+
+        return real(job, pending, states, take, **{**opts, "threads": 1})
+
+    _auto_exec.execute = stop_after_five
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            simulate_automaton(equilibrium_stop_automaton(), "splitting", checkpoint=ck, checkpoint_every=100, **kw)
+    finally:
+        _auto_exec.execute = real
+    with np.load(ck / _auto_exec.CHECKPOINT_FILE) as d:
+        assert int(d["done"].sum()) == 5  # written on the interrupt although checkpoint_every was not reached
+    resumed = simulate_automaton(equilibrium_stop_automaton(), "splitting", checkpoint=ck, resume=True, **kw)
+    on_dask = simulate_automaton(equilibrium_stop_automaton(), "splitting", scheduler="dask", **kw)
+    for other in (resumed, on_dask):
+        assert np.array_equal(other.counts["H"], whole.counts["H"]) and np.array_equal(other.chunk_sums,
+                                                                                     whole.chunk_sums)
+        assert np.array_equal(other.events, whole.events)
+    with pytest.raises(CheckpointError, match="another run"):
+        simulate_automaton(equilibrium_stop_automaton(), "splitting", checkpoint=ck, resume=True,
+                           params={"r": 0.9}, **kw)
+    with pytest.raises(ParameterError, match="exists; pass resume=True"):
+        simulate_automaton(equilibrium_stop_automaton(), "splitting", checkpoint=ck, **kw)
+    path = ck / _auto_exec.CHECKPOINT_FILE
+    with np.load(path) as d:
+        arrays = {k: d[k] for k in d.files}
+    arrays["counts"] = arrays["counts"] * 2  # doubled counts, old checksum
+    np.savez(path, **arrays)
+    with pytest.raises(CheckpointError, match="checksum"):
+        simulate_automaton(equilibrium_stop_automaton(), "splitting", checkpoint=ck, resume=True, **kw)
+    with pytest.raises(ParameterError, match="unknown scheduler"):
+        simulate_automaton(equilibrium_stop_automaton(), "splitting", scheduler="mpi", **kw)
+
+
 def test_bad_requests_are_refused_in_one_line():
     A = equilibrium_stop_automaton()
     base = dict(dt=0.01, paths=4, t_end=1.0, x0=(0.5, 0.0), seed=1, histograms={"H": (0.0, 4.0, 20)})

@@ -165,3 +165,19 @@ def test_filter_names_match_the_registry():
     from vibro.cli.mc_automaton import FILTERS
 
     assert FILTERS == FILTER_KINDS
+
+
+def test_automaton_checkpoint_and_resume_from_the_command_line_match_one_run(tmp, capsys):
+    base = ["mc", "--model", "impact_pair", "--scheme", "splitting", "--dt", "0.01", "--paths", "16", "--t-end", "40",
+            "--t-burn", "5", "--seed", "2", "--range", "z=-0.2:0.2:20", "--h-max", "1", "--bins", "20",
+            "--chunk-paths", "2"]
+    assert _run(base + ["--out", tmp / "one.csv"]) == 0
+    assert _run(base + ["--out", tmp / "two.csv", "--checkpoint", tmp / "ck", "--checkpoint-every", "1"]) == 0
+    capsys.readouterr()
+    # resuming a finished run recomputes nothing and writes the same histogram
+    assert _run(base + ["--out", tmp / "three.csv", "--checkpoint", tmp / "ck", "--resume"]) == 0
+    one = (tmp / "one.csv").read_text()
+    assert one == (tmp / "two.csv").read_text() == (tmp / "three.csv").read_text()
+    rc = _run(base + ["--out", tmp / "four.csv", "--checkpoint", tmp / "ck", "--resume", "--seed", "3"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "another run" in err and len(err.strip().splitlines()) == 1

@@ -13,15 +13,15 @@ import math
 import os
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
 
 from hybrid.errors import ModelError, ParameterError
 
-from . import _auto_codegen, _codegen, _rng
+from . import _auto_codegen, _auto_exec, _rng
 from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, check_chunk_count
 from ._statistics import Estimate, ratio_estimate
 
@@ -303,7 +303,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                        speed_range: tuple = (0.0, 10.0, 100), stride: int = 1, chunk_paths: int = 8,
                        threads: int | None = None, convention: str = "stratonovich",
                        max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True, phases: int = 0,
-                       period: float | None = None) -> AutomatonEnsemble:
+                       period: float | None = None, scheduler=None, checkpoint=None, resume: bool = False,
+                       checkpoint_every: int = 4) -> AutomatonEnsemble:
     """Monte Carlo ensemble of a hybrid automaton with noise, crossings located inside the step.
 
     Parameters
@@ -343,6 +344,12 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         How the modes' noise is meant (physical white noise: Stratonovich, with the Wong-Zakai drift).
     max_path_steps : float
         Refuse requests larger than this many path-steps.
+    scheduler : None, "threads", "dask", "dask=ADDRESS" or a ``distributed.Client``
+        Where chunks run: local threads (default) or Dask (a LocalCluster for "dask"; workers generate or load the
+        kernel from its source). Never changes a number.
+    checkpoint, resume, checkpoint_every : path or None, bool, int
+        Directory of a checkpoint (atomic, checksummed, tied to this run's exact settings) written every
+        ``checkpoint_every`` chunks, at the end and on an interrupt; ``resume=True`` skips the chunks it holds.
     check_dt : bool
         Apply the step rule of :func:`guard_step_rule`: a pilot (a copy of chunk 0's stream, 2 % of the steps,
         at least 2000) refuses a ``dt`` with which one step moves a guard across half of the range that guard
@@ -383,6 +390,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     paths = _as_int("paths", paths)
     stride = _as_int("stride", stride)
     chunk_paths = _as_int("chunk_paths", chunk_paths)
+    checkpoint_every = _as_int("checkpoint_every", checkpoint_every)
     dt_requested, phase_steps = dt, 1
     if isinstance(phases, bool) or not isinstance(phases, (int, np.integer)) or phases < 0:
         raise ParameterError(f"phases={phases!r} must be an integer >= 0 (0: no phase sections)")
@@ -469,75 +477,82 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     src, st = _auto_codegen.generate_source(automaton, scheme, obs, convention)
     sch.check(st)
     name = f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}"
-    module, _ = _codegen.load_source(name, src)
+    ckdir = Path(checkpoint) if checkpoint is not None else None
+    if resume and ckdir is None:
+        raise ParameterError("resume=True needs a checkpoint directory")
+    if not (scheduler in (None, "threads", "local") or hasattr(scheduler, "submit")
+            or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")):
+        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
+    if ckdir is not None:
+        _auto_exec.check_directory(ckdir, resume)
 
     n_chunks = -(-paths // chunk_paths)
     states = _rng.chunk_states(seed, n_chunks)
     npaths = np.full(n_chunks, chunk_paths, dtype=np.int64)
     npaths[-1] = paths - chunk_paths * (n_chunks - 1)
-    zx, zk, zf = _rng.ziggurat_tables()
-    p = np.array([values[k] for k in st.params], dtype=float)
     n_obs = max(len(names), 1)
     width = max(bins) + 2 if bins else 3
     n_tr = len(st.transitions)
-    obs_lo = np.array(lo or [0.0], dtype=float)
-    obs_scale = np.array(scale or [1.0], dtype=float)
-    obs_bins = np.array(bins or [1], dtype=np.int64)
-    v_scale = int(v_bins) / float(v_hi)
-    hist = np.zeros((n_chunks, n_obs, width), dtype=np.int64)
-    jhist = np.zeros((n_chunks, int(j_bins[1]), int(j_bins[0])), dtype=np.int64) if joint is not None else None
-    vhist = np.zeros((n_chunks, max(n_tr, 1), int(v_bins) + 1), dtype=np.int64)
-    counts = np.zeros((n_chunks, len(COUNT_NAMES)), dtype=np.int64)
-    sums = np.zeros((n_chunks, n_obs))
-    sumsq = np.zeros((n_chunks, n_obs))
-    events = np.zeros((n_chunks, max(n_tr, 1)), dtype=np.int64)
-    dummy_joint = np.zeros((1, 1), dtype=np.int64)
     n_ph = max(phases, 1)
-    phist = np.zeros((n_chunks, n_ph, n_obs, width), dtype=np.int64)
-    psums = np.zeros((n_chunks, n_ph, n_obs))
-    pcount = np.zeros((n_chunks, n_ph), dtype=np.int64)
-    mode_index = mode_names.index(mode0)
-
-    gstat = np.zeros((n_chunks, max(n_tr, 1), 4))
-    gstat[:, :, 2], gstat[:, :, 3] = np.inf, -np.inf
-
-    def call(rng_state, k, burn, samples, out):
-        hist_k, jhist_k, vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k, phist_k, psums_k, pcount_k = out
-        module.run_chunk(rng_state, npaths[k], burn, samples, stride, dt, 0.0, x0, mode_index, p, zx, zk, zf,
-                         sch.code, obs_lo, obs_scale, obs_bins, hist_k, jx, jy, j_lo, j_scale, j_bins, jhist_k,
-                         v_scale, int(v_bins), vhist_k, counts_k, sums_k, sumsq_k, events_k, gstat_k, phases,
-                         phase_steps, phist_k, psums_k, pcount_k)
-
-    def run(k):
-        call(states[k], k, n_burn, n_samp, (hist[k], jhist[k] if jhist is not None else dummy_joint, vhist[k],
-                                           counts[k], sums[k], sumsq[k], events[k], gstat[k], phist[k], psums[k],
-                                           pcount[k]))
+    i64 = np.int64
+    shapes = {
+        "hist": ((n_obs, width), i64, 0), "jhist": ((int(j_bins[1]), int(j_bins[0])), i64, 0),
+        "vhist": ((max(n_tr, 1), int(v_bins) + 1), i64, 0), "counts": ((len(COUNT_NAMES),), i64, 0),
+        "sums": ((n_obs,), float, 0.0), "sumsq": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
+        "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((n_ph, n_obs, width), i64, 0),
+        "psums": ((n_ph, n_obs), float, 0.0), "pcount": ((n_ph,), i64, 0),
+    }
+    args = dict(n_burn=n_burn, n_samp=n_samp, stride=stride, dt=dt, x0=x0, mode0=mode_names.index(mode0),
+                p=np.array([values[k] for k in st.params], dtype=float), scheme=sch.code,
+                obs_lo=np.array(lo or [0.0], dtype=float), obs_scale=np.array(scale or [1.0], dtype=float),
+                obs_bins=np.array(bins or [1], dtype=np.int64), jx=jx, jy=jy, j_lo=j_lo, j_scale=j_scale,
+                j_bins=j_bins, v_scale=int(v_bins) / float(v_hi), v_bins=int(v_bins), phases=phases,
+                phase_steps=phase_steps)
+    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
+    rows = {k: np.zeros((n_chunks, *shape), dtype=dtype) for k, (shape, dtype, _) in shapes.items()}
+    module = job.module()  # compile (or load) here, before the pilot and any worker
 
     step_rule = None
     if check_dt and n_tr:
         # a pilot on a copy of chunk 0's stream (the run's numbers do not change): refuse before the work
         n_steps = n_burn + n_samp * stride
-        pilot_steps = min(n_steps, max(2000, n_steps // 50))
-        g_pilot = gstat[:1].copy()
-        call(states[0].copy(), 0, pilot_steps, 0, (np.zeros_like(hist[0]), dummy_joint, np.zeros_like(vhist[0]),
-                                                  np.zeros_like(counts[0]), np.zeros_like(sums[0]),
-                                                  np.zeros_like(sumsq[0]), np.zeros_like(events[0]), g_pilot[0],
-                                                  np.zeros_like(phist[0]), np.zeros_like(psums[0]),
-                                                  np.zeros_like(pcount[0])))
-        step_rule = guard_step_rule(g_pilot[0], [t.name for t in st.transitions], dt, refuse=True, warn=False)
+        pilot = job.run(0, states[0].copy(), burn=min(n_steps, max(2000, n_steps // 50)), samples=0, module=module)
+        step_rule = guard_step_rule(_guard_stats(pilot["gstat"][None]), [t.name for t in st.transitions], dt,
+                                    refuse=True, warn=False)
 
-    workers = threads or os.cpu_count() or 1
-    if workers == 1 or n_chunks == 1:
-        for k in range(n_chunks):
-            run(k)
-    else:
-        with ThreadPoolExecutor(max_workers=min(workers, n_chunks)) as pool:
-            list(pool.map(run, range(n_chunks)))  # each chunk writes its own rows: order-independent
+    run_id = _auto_exec.identity({
+        "source": _auto_codegen.source_hash(src), "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end,
+        "t_burn": t_burn, "stride": stride, "seed": seed, "chunk_paths": chunk_paths, "x0": x0.tolist(),
+        "mode0": mode0, "params": {k: float(v) for k, v in values.items()}, "histograms": histograms,
+        "joint": joint, "speed_range": speed_range, "phases": phases, "period": period, "convention": convention})
+    done = np.zeros(n_chunks, dtype=bool)
+    if ckdir is not None and resume:
+        loaded = _auto_exec.load(ckdir, run_id, rows)
+        done = loaded if loaded is not None else done
+    since = 0
 
+    def accept(k, out):
+        nonlocal since
+        for key, arr in out.items():
+            rows[key][k] = arr
+        done[k] = True
+        since += 1
+        if ckdir is not None and since >= checkpoint_every:
+            _auto_exec.write(ckdir, run_id, done, rows)
+            since = 0
+
+    pending = [k for k in range(n_chunks) if not done[k]]
+    try:
+        _auto_exec.execute(job, pending, states, accept, threads=threads or os.cpu_count() or 1, scheduler=scheduler)
+    finally:
+        if ckdir is not None and since:  # keep every finished chunk, also on an interrupt
+            _auto_exec.write(ckdir, run_id, done, rows)
+    hist, vhist, counts, sums, events = rows["hist"], rows["vhist"], rows["counts"], rows["sums"], rows["events"]
+    jhist = rows["jhist"] if joint is not None else None
+    phist, psums, pcount = rows["phist"], rows["psums"], rows["pcount"]
     if n_tr:
-        whole = np.concatenate([gstat[:, :, :2].sum(axis=0), gstat[:, :, 2:3].min(axis=0),
-                                gstat[:, :, 3:4].max(axis=0)], axis=1)
-        step_rule = guard_step_rule(whole, [t.name for t in st.transitions], dt, refuse=False, warn=check_dt)
+        step_rule = guard_step_rule(_guard_stats(rows["gstat"]), [t.name for t in st.transitions], dt,
+                                    refuse=False, warn=check_dt)
     flags = {nm: int(counts[:, i].sum()) for i, nm in enumerate(COUNT_NAMES)}
     edges = {nm: np.linspace(lo[i], lo[i] + bins[i] / scale[i], bins[i] + 1) for i, nm in enumerate(names)}
     hsum = hist.sum(axis=0)
@@ -573,6 +588,12 @@ STEP_REFUSE = 0.5
 """Refuse a step that moves a guard (4 x its rms change per step) by more than this share of the guard's span."""
 STEP_WARN = 0.1
 """Warn above this share (the oscillator rule's speed * dt / gap thresholds, carried to any guard)."""
+
+
+def _guard_stats(gstat: np.ndarray) -> np.ndarray:
+    """Chunks' guard statistics (chunks, transitions, 4) combined: sums and counts add, the span takes extremes."""
+    return np.concatenate([gstat[:, :, :2].sum(axis=0), gstat[:, :, 2:3].min(axis=0),
+                           gstat[:, :, 3:4].max(axis=0)], axis=1)
 
 
 def guard_step_rule(gstat: np.ndarray, names, dt: float, *, refuse: bool, warn: bool = True) -> dict:

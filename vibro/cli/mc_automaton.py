@@ -189,12 +189,12 @@ def run(args, resolved) -> int:
     from vibro.provenance import record, write_sidecar
 
     automaton, params, base = resolved
-    for flag, name in ((args.joint, "--joint"), (args.checkpoint, "--checkpoint")):
-        if flag:
-            raise ParameterError(f"{name} is for oscillator models; automaton models write their observables' "
-                                 "histograms (--observable, --range)")
-    if args.scheduler not in (None, "threads"):
-        raise ParameterError(f"--scheduler {args.scheduler}: automaton models run on threads only")
+    if args.joint:
+        raise ParameterError("--joint is for oscillator models; automaton models write their observables' "
+                             "histograms (--observable, --range)")
+    if args.scheduler == "cuda":
+        raise ParameterError("--scheduler cuda: automaton models run on threads or Dask (the CUDA kernel is the "
+                             "oscillator's)")
     if getattr(args, "phases", 0):
         # an automaton declares no forcing period: sections at a guessed period would be silently wrong
         raise ParameterError("--phases needs a forced oscillator model (duffing-forced, or forcing= in a model file); "
@@ -217,7 +217,9 @@ def run(args, resolved) -> int:
         ens = simulate_automaton(automaton, args.scheme, dt=args.dt, paths=args.paths, t_end=args.t_end,
                                  t_burn=args.t_burn, x0=x0, params=params, seed=args.seed, observables=obs,
                                  histograms=hist, stride=args.stride, chunk_paths=chunk,
-                                 max_path_steps=args.max_path_steps)
+                                 max_path_steps=args.max_path_steps, scheduler=args.scheduler,
+                                 checkpoint=args.checkpoint, resume=args.resume,
+                                 checkpoint_every=args.checkpoint_every)
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
     if args.scheme != "splitting":
         try:

@@ -1,0 +1,173 @@
+"""Where the chunks of an automaton ensemble run: threads or Dask, with checkpoints and resume.
+
+Each chunk k fills its own row of every per-chunk array from its own random stream, so the rows do not depend on
+where or in which order chunks run: threads, a Dask cluster and a resumed checkpoint give the same bits.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from hybrid.errors import CheckpointError, ParameterError
+from hybrid.io import atomic_write
+
+from . import _codegen, _rng
+
+CHECKPOINT_FILE = "automaton_checkpoint.npz"
+CHECKPOINT_FORMAT = 1
+
+PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "sumsq", "events", "gstat", "phist", "psums", "pcount")
+"""The kernel's per-chunk outputs, in its argument order."""
+
+
+class AutomatonJob:
+    """Everything a chunk needs besides its id and stream: the kernel source and its arguments (picklable).
+
+    ``shapes`` maps each name of :data:`PER_CHUNK` to ``(shape, dtype, fill)`` of one chunk's array.
+    """
+
+    def __init__(self, name: str, src: str, args: dict, npaths: np.ndarray, shapes: dict):
+        self.name, self.src, self.args, self.npaths, self.shapes = name, src, args, npaths, shapes
+
+    def module(self):
+        module, _ = _codegen.load_source(self.name, self.src)
+        return module
+
+    def empty(self) -> dict:
+        out = {k: np.full(shape, fill, dtype=dtype) for k, (shape, dtype, fill) in self.shapes.items()}
+        if "gstat" in out:  # [sum, count, min, max] of the guard changes: the extremes start empty
+            out["gstat"][:, 2], out["gstat"][:, 3] = np.inf, -np.inf
+        return out
+
+    def run(self, k: int, rng_state: np.ndarray, burn: int | None = None, samples: int | None = None,
+            module=None) -> dict:
+        """Run chunk ``k`` from ``rng_state`` (burn-in and samples default to the run's); its arrays."""
+        module = self.module() if module is None else module
+        a, out = self.args, self.empty()
+        burn = a["n_burn"] if burn is None else burn
+        samples = a["n_samp"] if samples is None else samples
+        zx, zk, zf = _rng.ziggurat_tables()
+        module.run_chunk(rng_state, self.npaths[k], burn, samples, a["stride"], a["dt"], 0.0, a["x0"], a["mode0"],
+                         a["p"], zx, zk, zf, a["scheme"], a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
+                         a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
+                         a["v_bins"], out["vhist"], out["counts"], out["sums"], out["sumsq"], out["events"],
+                         out["gstat"], a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"])
+        return out
+
+
+def _remote(job: AutomatonJob, k: int, rng_state: np.ndarray):
+    """Dask task: load (or generate and compile) the kernel on the worker, run one chunk."""
+    return k, job.run(k, rng_state)
+
+
+def identity(settings: dict) -> str:
+    """A digest of everything that decides the numbers (parameters in full precision)."""
+    text = json.dumps(settings, sort_keys=True, default=lambda v: float.hex(v) if isinstance(v, float) else str(v))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _checksum(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def check_directory(directory: Path, resume: bool) -> None:
+    """Before any work: a directory that can be written, and no checkpoint to overwrite unless resuming."""
+    if directory.exists() and not directory.is_dir():
+        raise CheckpointError(f"checkpoint {str(directory)!r} is a file, not a directory; give a directory")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CheckpointError(f"cannot create the checkpoint directory {str(directory)!r} ({exc.strerror or exc})") \
+            from None
+    if not resume and (directory / CHECKPOINT_FILE).exists():
+        raise ParameterError(f"{directory / CHECKPOINT_FILE} exists; pass resume=True or another directory")
+
+
+def write(directory: Path, run_id: str, done: np.ndarray, rows: dict) -> None:
+    arrays = {**rows, "done": done, "format": np.array(CHECKPOINT_FORMAT), "identity": np.array(run_id)}
+    arrays["checksum"] = np.array(_checksum(arrays))
+    atomic_write(directory / CHECKPOINT_FILE, lambda tmp: np.savez(tmp, **arrays))
+
+
+def load(directory: Path, run_id: str, rows: dict) -> np.ndarray | None:
+    """Fill ``rows`` from the checkpoint and return its done-mask, or None when there is none."""
+    path = directory / CHECKPOINT_FILE
+    if not path.exists():
+        return None
+    hint = "delete it or use another checkpoint directory"
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            arrays = {k: d[k] for k in d.files}
+    except Exception as exc:  # truncated or not a zip: numpy raises many types
+        raise CheckpointError(f"checkpoint {path} cannot be read ({type(exc).__name__}): it is corrupt; {hint}") \
+            from None
+    stored = str(arrays.pop("checksum", ""))
+    if "format" not in arrays or int(arrays["format"]) != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"checkpoint {path} has an unknown format (need {CHECKPOINT_FORMAT}); {hint}")
+    if stored != _checksum(arrays):
+        raise CheckpointError(f"checkpoint {path} fails its checksum (edited or corrupt); {hint}")
+    if str(arrays["identity"]) != run_id:
+        raise CheckpointError(f"checkpoint {path} was made by another run (automaton, parameters or settings "
+                              "differ); resume with the same arguments or use another directory")
+    for key, target in rows.items():
+        if arrays[key].shape != target.shape:
+            raise CheckpointError(f"checkpoint {path} does not fit this run ({key} has another shape); {hint}")
+        target[...] = arrays[key]
+    return arrays["done"].astype(bool)
+
+
+def execute(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, threads: int, scheduler=None) -> None:
+    """Run the ``pending`` chunks; ``accept(k, arrays)`` takes each result in the calling thread."""
+    if scheduler in (None, "threads", "local"):
+        module = job.module()
+        workers = max(1, min(threads, len(pending)))
+        if workers == 1:
+            for k in pending:
+                accept(k, job.run(k, states[k].copy(), module=module))
+            return
+        pool = ThreadPoolExecutor(max_workers=workers)
+        try:
+            for k, out in zip(pending, pool.map(lambda k: job.run(k, states[k].copy(), module=module), pending)):
+                accept(k, out)
+        finally:  # on Ctrl-C do not wait for the queued chunks (the checkpoint keeps what is done)
+            pool.shutdown(wait=False, cancel_futures=True)
+        return
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:  # pragma: no cover
+        raise ParameterError("scheduler='dask' needs dask.distributed: pip install 'dask[distributed]'") from exc
+    own = []
+    if isinstance(scheduler, str):
+        name, _, address = scheduler.partition("=")
+        if name != "dask":
+            raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
+        if address:
+            client = Client(address)
+        else:
+            cluster = LocalCluster(n_workers=min(2, os.cpu_count() or 1), threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            own.append(cluster)
+            client = Client(cluster)
+        own.insert(0, client)
+    else:
+        client = scheduler
+    try:
+        futures = [client.submit(_remote, job, k, states[k].copy(), pure=False, retries=3,
+                                 key=f"vibro-auto-{job.name}-{k}-{os.getpid()}-{time.time_ns()}") for k in pending]
+        for fut in as_completed(futures):
+            accept(*fut.result())
+    finally:
+        for obj in own:
+            obj.close()
