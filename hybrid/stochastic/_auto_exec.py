@@ -47,8 +47,10 @@ class AutomatonJob:
         return out
 
     def run(self, k: int, rng_state: np.ndarray, burn: int | None = None, samples: int | None = None,
-            module=None) -> dict:
-        """Run chunk ``k`` from ``rng_state`` (burn-in and samples default to the run's); its arrays."""
+            module=None, track: bool = False) -> dict:
+        """Run chunk ``k`` from ``rng_state`` (burn-in and samples default to the run's); its arrays.
+
+        ``track`` records the guard statistics of the step rule (the pilot's job)."""
         module = self.module() if module is None else module
         a, out = self.args, self.empty()
         burn = a["n_burn"] if burn is None else burn
@@ -58,7 +60,7 @@ class AutomatonJob:
                          a["p"], zx, zk, zf, a["scheme"], a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
                          a["v_bins"], out["vhist"], out["counts"], out["sums"], out["sumsq"], out["events"],
-                         out["gstat"], a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"])
+                         out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"])
         return out
 
 

@@ -352,8 +352,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         ``checkpoint_every`` chunks, at the end and on an interrupt; ``resume=True`` skips the chunks it holds.
     check_dt : bool
         Apply the step rule of :func:`guard_step_rule`: a pilot (a copy of chunk 0's stream, 2 % of the steps,
-        at least 2000) refuses a ``dt`` with which one step moves a guard across half of the range that guard
-        spans along the paths; the run itself warns above a tenth. ``settings['step_rule']`` keeps the figures.
+        at least 5000) refuses a ``dt`` with which one step moves a guard across half of the range that guard
+        spans along the paths, and warns above a tenth. ``settings['step_rule']`` keeps the figures.
     phases, period : int, float
         Poincaré sections of a periodically forced automaton: with ``phases=N`` the observables are also
         histogrammed at the times k T / N + i T (k = 0 .. N - 1, after burn-in), besides the time average. So that
@@ -516,9 +516,10 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     if check_dt and n_tr:
         # a pilot on a copy of chunk 0's stream (the run's numbers do not change): refuse before the work
         n_steps = n_burn + n_samp * stride
-        pilot = job.run(0, states[0].copy(), burn=min(n_steps, max(2000, n_steps // 50)), samples=0, module=module)
+        pilot = job.run(0, states[0].copy(), burn=min(n_steps, max(5000, n_steps // 50)), samples=0, module=module,
+                        track=True)
         step_rule = guard_step_rule(_guard_stats(pilot["gstat"][None]), [t.name for t in st.transitions], dt,
-                                    refuse=True, warn=False)
+                                    refuse=True, warn=True)
 
     run_id = _auto_exec.identity({
         "source": _auto_codegen.source_hash(src), "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end,
@@ -550,9 +551,6 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     hist, vhist, counts, sums, events = rows["hist"], rows["vhist"], rows["counts"], rows["sums"], rows["events"]
     jhist = rows["jhist"] if joint is not None else None
     phist, psums, pcount = rows["phist"], rows["psums"], rows["pcount"]
-    if n_tr:
-        step_rule = guard_step_rule(_guard_stats(rows["gstat"]), [t.name for t in st.transitions], dt,
-                                    refuse=False, warn=check_dt)
     flags = {nm: int(counts[:, i].sum()) for i, nm in enumerate(COUNT_NAMES)}
     edges = {nm: np.linspace(lo[i], lo[i] + bins[i] / scale[i], bins[i] + 1) for i, nm in enumerate(names)}
     hsum = hist.sum(axis=0)
