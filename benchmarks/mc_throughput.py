@@ -258,7 +258,7 @@ def general_against_specialised(paths, t_end, reps):
 
     model = DuffingImpact(restitution=Ma(0.4), **PARAMS)
     auto = model.to_automaton()
-    dt, t_burn, chunk = 2e-3, 100.0, 4
+    dt, t_burn, chunk = 2e-3, 100.0, 8
     common = dict(dt=dt, paths=paths, t_end=t_end, t_burn=t_burn, seed=1, chunk_paths=chunk)
     n = paths * t_end / dt
     print(f"\n4. Same model, two kernels: Example 1 (Ma 0.4), dt={dt:g}, {paths} paths x {t_end:g}, chunks of {chunk}, "

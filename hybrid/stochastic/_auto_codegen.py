@@ -223,19 +223,19 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
         velocity_of = dict(st.pairs)
         for q in velocity_of:
             lines.append(f"_y{q} = _x{q} + dt * _y{velocity_of[q]}")
+    quiet = ["not track"]  # the conditions under which no guard can have fired in the step
     for j, tr in enumerate(st.transitions):
         if tr.source != st.modes[k]:
             continue
-        block(["_g1"], [tr.guard], f"g{j}_", {**to_y, **code_t1})
+        block([f"_g{j}"], [tr.guard], f"g{j}_", {**to_y, **code_t1})
         d = int(tr.direction)
         if d > 0:
-            lines.append("if _g1 >= 0.0:")
+            quiet.append(f"_g{j} < 0.0")
         elif d < 0:
-            lines.append("if _g1 <= 0.0:")
+            quiet.append(f"_g{j} > 0.0")
         else:
-            block(["_g0"], [tr.guard], f"h{j}_")
-            lines.append("if crosses(0, _g0, _g1):")
-        lines.append("    _slow = True")
+            block([f"_h{j}"], [tr.guard], f"h{j}_")
+            quiet.append(f"not crosses(0, _h{j}, _g{j})")
     commit = [f"_x{i} = _y{i}" for i in range(n)]
     if scheme == "splitting":
         # noise, then the closing kick, at the end of the step (as in the event loop)
@@ -251,8 +251,11 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
         lines.extend(f"_x{i} += _k{i}" for i in vel)
         commit += after
         lines = inner
-    lines.append("if not _slow:")
+    # one combined test: a single well-predicted branch in the hot loop
+    lines.append(f"if {' and '.join(quiet)}:")
     lines.extend("    " + c for c in commit)
+    lines.append("else:")
+    lines.append("    _slow = True")
     return "\n".join(lines)
 
 
@@ -311,10 +314,16 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         not (sp.sympify(tr.guard).free_symbols & velocities) for tr in st.transitions)
     ind = textwrap.indent
     src = _TEMPLATE.format(
-        unpack=ind("\n".join(f"_p{j} = p[{j}]" for j in range(len(st.params))) or "pass", " " * 4),
-        load=ind("\n".join(f"_x{i} = XL[_l, {i}]" for i in range(n)), " " * 16),
+        unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + [
+            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0\n_sq{o} = 0.0"
+            for o in range(len(obs))]) or "pass", " " * 4),
+        binning=ind("\n".join(_BINNING.format(o=o) for o in range(len(obs))) or "pass", " " * 16),
+        flush=ind("\n".join(f"sums[{o}] += _sum{o}\nsumsq[{o}] += _sq{o}" for o in range(len(obs))) or "pass",
+                  " " * 4),
+        load=ind("\n".join([f"_x{i} = XL[_l, {i}]" for i in range(n)]
+                            + ["mode = ML[_l]" if len(st.modes) > 1 else "mode = 0"]), " " * 16),
         draw=ind("\n".join(f"z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)\n_w{k} = sdt * z"
-                           for k in range(m)) + "\n_slow = track", " " * 16),
+                           for k in range(m)) + "\n_slow = False", " " * 16),
         fast=ind("\n".join(fast), " " * 16),
         store_dw=ind("\n".join(f"dw[{k}] = _w{k}" for k in range(m)), " " * 20),
         reload=ind("\n".join(f"_x{i} = x[{i}]" for i in range(n)), " " * 20),
@@ -339,6 +348,23 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         velocities=tuple(velocity_of[q] for q in positions) + (0,),
     )
     return src, st
+
+
+# one observable of a sample: sums in registers (written once per chunk), the histogram with under/overflow bins
+_BINNING = """\
+_v = ob[{o}]
+if _v != _v:
+    counts[3] += 1
+else:
+    _sum{o} += _v
+    _sq{o} += _v * _v
+    _b = (_v - _lo{o}) * _sc{o}
+    if _b < 0.0:
+        hist[{o}, 0] += 1
+    elif _b >= _nb{o}:
+        hist[{o}, _nb{o} + 1] += 1
+    else:
+        hist[{o}, int(_b) + 1] += 1"""
 
 
 def source_hash(src: str) -> str:
@@ -614,6 +640,8 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     ob = np.empty(N_OBS)
     XL = np.empty((LANES, N))
     ML = np.empty(LANES, dtype=np.int64)
+    SL = np.zeros(LANES, dtype=np.bool_)
+    _nsamp = 0
 {unpack}
     for _g in range(0, npaths, LANES):
         nl = min(LANES, npaths - _g)
@@ -635,7 +663,6 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                     cs = 0
                     sample = True
             for _l in range(nl):
-                mode = ML[_l]
 {load}
 {draw}
 {fast}
@@ -648,8 +675,13 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                     ML[_l] = mode
 {reload}
 {store}
-                if not (phase_now or sample):
-                    continue
+                SL[_l] = _slow
+            if not (phase_now or sample):
+                continue
+            # statistics in a loop of their own: the stepping loop above stays short
+            for _l in range(nl):
+{load}
+                _slow = SL[_l]
 {observe}
                 if phase_now:
                     kp = ((step + 1) // phase_steps) % n_phase
@@ -668,7 +700,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                             phist[kp, o, int(b) + 1] += 1
                 if not sample:
                     continue
-                counts[0] += 1
+                _nsamp += 1
                 # the admissible set: no self-loop guard of this mode may be beyond its firing side (the fast
                 # step has already checked the guards where that settles it)
                 if _slow or not FAST_CHECKS_SET:
@@ -680,20 +712,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                             if (DIRECTION[j] > 0 and gj > 1e-9) or (DIRECTION[j] < 0 and gj < -1e-9):
                                 counts[2] += 1
                                 break
-                for o in range(N_OBS):
-                    v = ob[o]
-                    if v != v:
-                        counts[3] += 1
-                        continue
-                    sums[o] += v
-                    sumsq[o] += v * v
-                    b = (v - obs_lo[o]) * obs_scale[o]
-                    if b < 0.0:
-                        hist[o, 0] += 1
-                    elif b >= obs_bins[o]:
-                        hist[o, obs_bins[o] + 1] += 1
-                    else:
-                        hist[o, int(b) + 1] += 1
+{binning}
                 if jx >= 0:
                     bx = (ob[jx] - j_lo[0]) * j_scale[0]
                     by = (ob[jy] - j_lo[1]) * j_scale[1]
@@ -701,5 +720,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                         jhist[int(by), int(bx)] += 1
                     else:
                         counts[4] += 1
+    counts[0] += _nsamp
+{flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
 '''
