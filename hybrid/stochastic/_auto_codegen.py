@@ -217,6 +217,20 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
                             e += sp.Rational(1, 2) * lg * (w[j] * w[kk] - (dt if j == kk else 0))
             inc.append(e)
         block([f"_y{i}" for i in range(n)], [xs[i] + inc[i] for i in range(n)], "a")
+    elif scheme == "symplectic":  # velocities by a Milstein step, then the positions' free flight at the new ones
+        vel = sorted({v for _, v in st.pairs})
+        inc = {}
+        for i in vel:
+            e = f[i] * dt + sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0)
+            for j in range(m):
+                for kk in range(m):
+                    lg = sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
+                    if lg != 0:
+                        e += sp.Rational(1, 2) * lg * (w[j] * w[kk] - (dt if j == kk else 0))
+            inc[i] = e
+        block([f"_y{i}" for i in vel], [xs[i] + inc[i] for i in vel], "a")
+        for q, v in st.pairs:
+            lines.append(f"_y{q} = _x{q} + dt * _y{v}")
     else:  # splitting: kick, free flight (positions only; velocities are the kicked ones)
         vel = sorted({v for _, v in st.pairs})
         block([f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
@@ -273,7 +287,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         funcs.append(names.function(f"_drift{k}", list(f), "out"))
     for k, G in enumerate(st.noise):
         funcs.append(names.function(f"_noise{k}", list(G), "out"))  # row-major n x m
-        if scheme == "milstein":
+        if scheme in ("milstein", "symplectic"):
             # L^j G_ik = sum_l G_lj dG_ik/dx_l, stored as [i, j, k] (row-major n x m x m)
             xs = [real_symbol(s) for s in st.states]
             lg = [sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
@@ -320,14 +334,18 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         binning=ind("\n".join(_BINNING.format(o=o) for o in range(len(obs))) or "pass", " " * 16),
         flush=ind("\n".join(f"sums[{o}] += _sum{o}\nsumsq[{o}] += _sq{o}" for o in range(len(obs))) or "pass",
                   " " * 4),
-        load=ind("\n".join([f"_x{i} = XL[_l, {i}]" for i in range(n)]
+        alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
+        init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
+        to_array_s=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
+        pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 20),
+        load=ind("\n".join([f"_x{i} = _L{i}[_l]" for i in range(n)]
                             + ["mode = ML[_l]" if len(st.modes) > 1 else "mode = 0"]), " " * 16),
         draw=ind("\n".join(f"z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)\n_w{k} = sdt * z"
                            for k in range(m)) + "\n_slow = False", " " * 16),
         fast=ind("\n".join(fast), " " * 16),
         store_dw=ind("\n".join(f"dw[{k}] = _w{k}" for k in range(m)), " " * 20),
         reload=ind("\n".join(f"_x{i} = x[{i}]" for i in range(n)), " " * 20),
-        store=ind("\n".join(f"XL[_l, {i}] = _x{i}" for i in range(n)), " " * 16),
+        store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
         to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
         observe=ind(names.scalar_block("ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")}),
                     " " * 16),
@@ -339,7 +357,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         directions=tuple(directions) + (0,), self_loops=tuple(self_loops) + (0,),
         drift_call=_dispatch("_drift", len(st.modes), "{f}(x, t, p, out)", 4),
         noise_call=_dispatch("_noise", len(st.modes), "{f}(x, t, p, out)", 4),
-        lgn_call=(_dispatch("_lgn", len(st.modes), "{f}(x, t, p, out)", 4) if scheme == "milstein"
+        lgn_call=(_dispatch("_lgn", len(st.modes), "{f}(x, t, p, out)", 4) if scheme in ("milstein", "symplectic")
                   else "    pass"),
         guard_call=_dispatch("_guard", len(st.transitions), "return {f}(x, t, p)", 4),
         reset_call=_dispatch("_reset", len(st.transitions), "{f}(x, t, p, out)", 4),
@@ -350,21 +368,22 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     return src, st
 
 
-# one observable of a sample: sums in registers (written once per chunk), the histogram with under/overflow bins
+# one observable of a sample: sums in registers (written once per chunk), the histogram with under/overflow bins;
+# NaN fails every comparison, so it is tested for only where the value is not in a bin (it is counted, not summed)
 _BINNING = """\
 _v = ob[{o}]
-if _v != _v:
-    counts[3] += 1
+_b = (_v - _lo{o}) * _sc{o}
+if _b >= 0.0 and _b < _nb{o}:
+    hist[{o}, int(_b) + 1] += 1
+elif _b < 0.0:
+    hist[{o}, 0] += 1
+elif _v == _v:
+    hist[{o}, _nb{o} + 1] += 1
 else:
-    _sum{o} += _v
-    _sq{o} += _v * _v
-    _b = (_v - _lo{o}) * _sc{o}
-    if _b < 0.0:
-        hist[{o}, 0] += 1
-    elif _b >= _nb{o}:
-        hist[{o}, _nb{o} + 1] += 1
-    else:
-        hist[{o}, int(_b) + 1] += 1"""
+    counts[3] += 1
+    _v = 0.0
+_sum{o} += _v
+_sq{o} += _v * _v"""
 
 
 def source_hash(src: str) -> str:
@@ -507,13 +526,32 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
     MAX_EVENTS of them (the excess is counted in counts[1]). The kernel comes here only for steps where a guard
     may fire (and for every step of the step rule's pilot, ``track``), so its cost does not matter.
     """
-    free_flight = scheme == 2
+    free_flight = scheme >= 2
     frac = 1.0  # share of the step still to run
-    if free_flight:
+    if scheme == 2:
         # kick: velocities by half the drift
         drift(mode, x, t, p, f)
         for k in range(N_POS):
             x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+    elif scheme == 3:
+        # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
+        drift(mode, x, t, p, f)
+        noise(mode, x, t, p, G)
+        lgn(mode, x, t, p, L)
+        for kv in range(N_POS):
+            i = VEL[kv]
+            acc = f[i] * dt
+            for k in range(M):
+                acc += G[i * M + k] * dw[k]
+            for jn in range(M):
+                for k in range(M):
+                    prod = dw[jn] * dw[k]
+                    if jn == k:
+                        prod -= dt
+                    acc += 0.5 * L[(i * M + jn) * M + k] * prod
+            xr[i] = acc
+        for kv in range(N_POS):
+            x[VEL[kv]] += xr[VEL[kv]]
     n_ev = 0
     while True:
         tau = frac * dt
@@ -588,7 +626,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
             if rec:
                 counts[1] += 1
             break
-    if free_flight:
+    if scheme == 2:
         # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
         noise(mode, x, t_end, p, G)
         for i in range(N):
@@ -600,6 +638,29 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
         for k in range(N_POS):
             x[VEL[k]] += 0.5 * dt * f[VEL[k]]
     return mode
+
+
+@nb.njit(nogil=True, cache=CACHE)
+def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, psums, pcount):
+    """The lanes' observables into phase section ``kp`` (out of line: inside the kernel's loop it slowed the
+    time average's statistics by about 10 %)."""
+    for _l in range(nl):
+        for i in range(N):
+            x[i] = XL[_l, i]
+        _observe(x, t, p, ob)
+        pcount[kp] += 1
+        for o in range(N_OBS):
+            v = ob[o]
+            if v != v:
+                continue
+            psums[kp, o] += v
+            b = (v - obs_lo[o]) * obs_scale[o]
+            if b < 0.0:
+                phist[kp, o, 0] += 1
+            elif b >= obs_bins[o]:
+                phist[kp, o, obs_bins[o] + 1] += 1
+            else:
+                phist[kp, o, int(b) + 1] += 1
 
 
 @nb.njit(nogil=True, cache=CACHE)
@@ -618,7 +679,8 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     observables also go into ``phist[k]``, ``psums[k]`` and ``pcount[k]`` with k = (steps / phase_steps) mod
     n_phase, so that section k holds the states at t0 + (k / n_phase + i) * period exactly.
 
-    ``scheme``: 0 Euler-Maruyama, 1 Milstein (commutative noise), 2 splitting (kick, free flight, noise, kick).
+    ``scheme``: 0 Euler-Maruyama, 1 Milstein (commutative noise), 2 splitting (kick, free flight, noise, kick), 3
+    symplectic Milstein (the velocities' Milstein step, then the positions' free flight at the new velocities).
     counts: [samples, event_overflow, outside, nonfinite, joint_outside]; events[j]: firings of transition j
     after burn-in; vhist[j]: |rate of change of guard j| at its firings, overflow in the last bin.
     gstat[j], only when ``track`` (the step rule's pilot, which runs every step through ``event_step``), every
@@ -642,13 +704,14 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     ML = np.empty(LANES, dtype=np.int64)
     SL = np.zeros(LANES, dtype=np.bool_)
     _nsamp = 0
+{alloc}
 {unpack}
     for _g in range(0, npaths, LANES):
         nl = min(LANES, npaths - _g)
         for _l in range(nl):
-            for i in range(N):
-                XL[_l, i] = x0[i]
+{init}
             ML[_l] = mode0
+            SL[_l] = False
         cs = 0
         for step in range(n_burn + n_samp * stride):
             rec = step >= n_burn
@@ -667,43 +730,31 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {draw}
 {fast}
                 if _slow:
-                    for i in range(N):
-                        x[i] = XL[_l, i]
+{to_array_s}
 {store_dw}
                     mode = event_step(mode, x, t, _t1, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins,
                                       counts, gstat, track, xa, va, xb, xs, xr, f, G, L)
                     ML[_l] = mode
+                    SL[_l] = True  # until the next sample: its admissible-set check is not settled
 {reload}
 {store}
-                SL[_l] = _slow
-            if not (phase_now or sample):
+            # statistics in loops of their own: the stepping loop above, and the time average's loop, stay short
+            if phase_now:
+                for _l in range(nl):
+{pack}
+                record_phase(((step + 1) // phase_steps) % n_phase, XL, nl, _t1, p, x, ob, obs_lo, obs_scale,
+                             obs_bins, phist, psums, pcount)
+            if not sample:
                 continue
-            # statistics in a loop of their own: the stepping loop above stays short
             for _l in range(nl):
 {load}
                 _slow = SL[_l]
 {observe}
-                if phase_now:
-                    kp = ((step + 1) // phase_steps) % n_phase
-                    pcount[kp] += 1
-                    for o in range(N_OBS):
-                        v = ob[o]
-                        if v != v:
-                            continue
-                        psums[kp, o] += v
-                        b = (v - obs_lo[o]) * obs_scale[o]
-                        if b < 0.0:
-                            phist[kp, o, 0] += 1
-                        elif b >= obs_bins[o]:
-                            phist[kp, o, obs_bins[o] + 1] += 1
-                        else:
-                            phist[kp, o, int(b) + 1] += 1
-                if not sample:
-                    continue
                 _nsamp += 1
                 # the admissible set: no self-loop guard of this mode may be beyond its firing side (the fast
                 # step has already checked the guards where that settles it)
                 if _slow or not FAST_CHECKS_SET:
+                    SL[_l] = False
 {to_array}
                     for jj in range(COUNT[mode]):
                         j = FIRST[mode] + jj
