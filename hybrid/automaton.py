@@ -121,6 +121,10 @@ class Transition:
         ``reset(state: numpy array, params: dict) -> numpy array``.
     priority : int
         When several guards fire at the same instant, the lowest priority number wins.
+    check : sympy relational or boolean, optional
+        A condition on the pre-jump state that must hold when the transition fires (for an impact, the
+        restitution coefficient in (0, 1]). Monte Carlo counts the firings where it fails (``bad_reset``) and
+        warns; the oscillator front end refuses the run.
 
     Examples
     --------
@@ -138,9 +142,15 @@ class Transition:
     direction: int = 0
     reset: ResetMap = ()
     priority: int = 0
+    check: object = None
 
     def __post_init__(self):
         object.__setattr__(self, "guard", _as_expr(self.guard, f"guard of transition {self.name!r}"))
+        if self.check is not None:
+            check = sp.sympify(self.check)
+            if not isinstance(check, (sp.logic.boolalg.Boolean, sp.core.relational.Relational)):
+                raise ModelError(f"transition {self.name!r}: check must be a condition (e.g. e <= 1), got {check!r}")
+            object.__setattr__(self, "check", canonical(check))
         if self.direction not in (-1, 0, 1):
             raise ModelError(
                 f"transition {self.name!r}: direction must be -1, 0 or +1, got {self.direction!r}"

@@ -604,9 +604,12 @@ class ImpactOscillator:
         mode = Mode("free", flow, noise)
         transitions = []
         if self.barrier_exprs is not None:
+            check = None
             try:
                 e_expr = self.restitution.expression(sp.Abs(Y))
                 reset = (X, -e_expr * Y)
+                # e must lie in (0, 1] at every impact: Monte Carlo counts the firings where it does not
+                check = sp.And(e_expr > 0, e_expr <= 1) if not e_expr.is_number else None
             except Exception:  # a callable law has no expression: reset numerically
                 law = self.restitution
 
@@ -617,9 +620,9 @@ class ImpactOscillator:
 
             left, right = self.barrier_exprs
             if np.isfinite(self.barriers[1]):
-                transitions.append(Transition("right", "free", "free", X - right, +1, reset, priority=0))
+                transitions.append(Transition("right", "free", "free", X - right, +1, reset, priority=0, check=check))
             if np.isfinite(self.barriers[0]):
-                transitions.append(Transition("left", "free", "free", X - left, -1, reset, priority=1))
+                transitions.append(Transition("left", "free", "free", X - left, -1, reset, priority=1, check=check))
         observables = {"H": self.energy_expr} if self.energy_expr is not None else {}
         return HybridAutomaton(
             states=(X, Y), parameters=dict(self.params), modes=[mode], transitions=transitions,

@@ -61,6 +61,6 @@ __all__ = [
 ]
 
 # Monte Carlo of any hybrid automaton with noise (n states, modes, guards, resets)
-from ._auto_runner import AUTOMATON_SCHEMES, AutomatonEnsemble, simulate_automaton  # noqa: E402
+from ._auto_runner import AUTOMATON_SCHEMES, AutomatonEnsemble, drive_automaton, simulate_automaton  # noqa: E402
 
-__all__ += ["AUTOMATON_SCHEMES", "AutomatonEnsemble", "simulate_automaton"]
+__all__ += ["AUTOMATON_SCHEMES", "AutomatonEnsemble", "drive_automaton", "simulate_automaton"]

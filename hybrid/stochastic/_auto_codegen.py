@@ -165,16 +165,28 @@ class _Names:
         else:
             body += [f"{target}[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
             sig = f"def {name}(x, t, p, {target}):"
-        return "@nb.njit(inline='always')\n" + sig + "\n" + textwrap.indent("\n".join(body), "    ") + "\n"
+        return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(body), "    ") + "\n"
 
 
-def _dispatch(name: str, count: int, call: str, indent: int) -> str:
-    """An if-chain calling ``{name}{k}`` with ``call`` for the index ``k``."""
-    lines = []
-    for k in range(count):
-        lines.append(f"{'if' if k == 0 else 'elif'} _which == {k}:")
-        lines.append(f"    {call.format(f=f'{name}{k}')}")
-    return textwrap.indent("\n".join(lines), " " * indent) if lines else " " * indent + "pass"
+    def dispatch(self, name: str, cases: list, target: str | None, default: str = "0.0") -> str:
+        """One numba function ``name(_which, x, t, p[, out])`` whose branch ``k`` computes ``cases[k]`` (a list
+        of expressions; common sub-expressions once per branch). One function per kind, not one per mode or
+        transition: numba compiles each function separately, and the count dominates the compile time."""
+        lines = self.unpack()
+        for k, outputs in enumerate(cases):
+            exprs = [sp.sympify(e).xreplace(self.subs) for e in outputs]
+            reps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols(f"_c{k}_"))
+            body = [f"{s} = {self.printer.doprint(e)}" for s, e in reps]
+            if target is None:
+                body.append(f"return {self.printer.doprint(reduced[0])}")
+            else:
+                body += [f"{target}[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
+            lines.append(f"{'if' if k == 0 else 'elif'} _which == {k}:")
+            lines.append(textwrap.indent("\n".join(body) or "pass", "    "))
+        if target is None:
+            lines.append(f"return {default}")
+        sig = f"def {name}(_which, x, t, p):" if target is None else f"def {name}(_which, x, t, p, {target}):"
+        return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(lines), "    ") + "\n"
 
 
 def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> str:
@@ -274,38 +286,43 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
 
 
 def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
-                    cache: bool = True) -> tuple[str, AutomatonStructure]:
+                    cache: bool = True, summed=()) -> tuple[str, AutomatonStructure]:
     """The numba module source of ``scheme`` for ``automaton`` and the structure it was derived from.
 
-    ``observables`` maps names to sympy expressions of the states, parameters and ``t``.
+    ``observables`` maps names to sympy expressions of the states, parameters and ``t``; those named in
+    ``summed`` are only summed (means and the joint histogram), not histogrammed.
     """
     st = analyse(automaton, convention)
     names = _Names(st)
     n, m = len(st.states), st.n_noise
-    funcs = []
-    for k, f in enumerate(st.drift):
-        funcs.append(names.function(f"_drift{k}", list(f), "out"))
-    for k, G in enumerate(st.noise):
-        funcs.append(names.function(f"_noise{k}", list(G), "out"))  # row-major n x m
-        if scheme in ("milstein", "symplectic"):
-            # L^j G_ik = sum_l G_lj dG_ik/dx_l, stored as [i, j, k] (row-major n x m x m)
-            xs = [real_symbol(s) for s in st.states]
-            lg = [sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
-                  for i in range(n) for j in range(m) for kk in range(m)]
-            funcs.append(names.function(f"_lgn{k}", lg, "out"))
-    for j, tr in enumerate(st.transitions):
-        funcs.append(names.function(f"_guard{j}", [tr.guard], None))
+    xs = [real_symbol(s) for s in st.states]
+    lgns = []
+    for G in st.noise:
+        # L^j G_ik = sum_l G_lj dG_ik/dx_l, stored as [i, j, k] (row-major n x m x m)
+        lgns.append([sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
+                     for i in range(n) for j in range(m) for kk in range(m)]
+                    if scheme in ("milstein", "symplectic") else [])
+    rates = []
+    for tr in st.transitions:
         if not tr.symbolic_reset:
             raise ModelError(
                 f"transition {tr.name!r}: the Monte Carlo kernel needs a symbolic reset (a tuple of expressions); "
                 "callable resets run in the orbit backends only"
             )
-        funcs.append(names.function(f"_reset{j}", list(tr.reset), "out"))
         # rate of change of the guard along the drift: the impact speed for a wall guard x - w
         src_mode = st.modes.index(tr.source)
-        xs = [real_symbol(s) for s in st.states]
-        rate = sum(sp.diff(tr.guard, xs[i]) * st.drift[src_mode][i] for i in range(n)) + sp.diff(tr.guard, TIME)
-        funcs.append(names.function(f"_grate{j}", [rate], None))
+        rates.append(sum(sp.diff(tr.guard, xs[i]) * st.drift[src_mode][i] for i in range(n))
+                     + sp.diff(tr.guard, TIME))
+    trs = st.transitions
+    funcs = [
+        names.dispatch("drift", [list(f) for f in st.drift], "out"),
+        names.dispatch("noise", [list(G) for G in st.noise], "out"),  # row-major n x m
+        names.dispatch("lgn", lgns, "out"),
+        names.dispatch("guard", [[tr.guard] for tr in trs], None),
+        names.dispatch("reset", [list(tr.reset) for tr in trs], "out"),
+        names.dispatch("grate", [[r] for r in rates], None),
+        names.dispatch("check", [[tr.check if tr.check is not None else sp.true] for tr in trs], None, "True"),
+    ]
     obs = list(observables.values())
     funcs.append(names.function("_observe", obs if obs else [sp.Integer(0)], "out"))
     # per mode: the transitions leaving it (indices into st.transitions), in priority order
@@ -331,7 +348,8 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + [
             f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0\n_sq{o} = 0.0"
             for o in range(len(obs))]) or "pass", " " * 4),
-        binning=ind("\n".join(_BINNING.format(o=o) for o in range(len(obs))) or "pass", " " * 16),
+        binning=ind("\n".join((_SUMMING if name in summed else _BINNING).format(o=o)
+                               for o, name in enumerate(observables)) or "pass", " " * 16),
         flush=ind("\n".join(f"sums[{o}] += _sum{o}\nsumsq[{o}] += _sq{o}" for o in range(len(obs))) or "pass",
                   " " * 4),
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
@@ -355,13 +373,6 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         funcs="\n\n".join(funcs),
         first=tuple(first) + (0,), count=tuple(count) + (0,), targets=tuple(targets) + (0,),
         directions=tuple(directions) + (0,), self_loops=tuple(self_loops) + (0,),
-        drift_call=_dispatch("_drift", len(st.modes), "{f}(x, t, p, out)", 4),
-        noise_call=_dispatch("_noise", len(st.modes), "{f}(x, t, p, out)", 4),
-        lgn_call=(_dispatch("_lgn", len(st.modes), "{f}(x, t, p, out)", 4) if scheme in ("milstein", "symplectic")
-                  else "    pass"),
-        guard_call=_dispatch("_guard", len(st.transitions), "return {f}(x, t, p)", 4),
-        reset_call=_dispatch("_reset", len(st.transitions), "{f}(x, t, p, out)", 4),
-        grate_call=_dispatch("_grate", len(st.transitions), "return {f}(x, t, p)", 4),
         positions=tuple(positions) + (0,), n_pos=len(positions),
         velocities=tuple(velocity_of[q] for q in positions) + (0,),
     )
@@ -380,6 +391,15 @@ elif _b < 0.0:
 elif _v == _v:
     hist[{o}, _nb{o} + 1] += 1
 else:
+    counts[3] += 1
+    _v = 0.0
+_sum{o} += _v
+_sq{o} += _v * _v"""
+
+
+_SUMMING = """\
+_v = ob[{o}]
+if _v != _v:
     counts[3] += 1
     _v = 0.0
 _sum{o} += _v
@@ -424,39 +444,7 @@ FAST_CHECKS_SET = {fast_checks_set}
 {funcs}
 
 
-@nb.njit(inline='always')
-def drift(_which, x, t, p, out):
-{drift_call}
-
-
-@nb.njit(inline='always')
-def noise(_which, x, t, p, out):
-{noise_call}
-
-
-@nb.njit(inline='always')
-def lgn(_which, x, t, p, out):
-{lgn_call}
-
-
-@nb.njit(inline='always')
-def guard(_which, x, t, p):
-{guard_call}
-    return 0.0
-
-
-@nb.njit(inline='always')
-def reset(_which, x, t, p, out):
-{reset_call}
-
-
-@nb.njit(inline='always')
-def grate(_which, x, t, p):
-{grate_call}
-    return 0.0
-
-
-@nb.njit(inline='always')
+@nb.njit(cache=CACHE)
 def crosses(d, g0, g1):
     # a state just reset onto the guard (g0 = 0) fires again only if the step carries it strictly beyond (with
     # Euler-Maruyama the velocity on the segment need not match the motion of the positions)
@@ -467,7 +455,7 @@ def crosses(d, g0, g1):
     return False
 
 
-@nb.njit(inline='always')
+@nb.njit(cache=CACHE)
 def interpolate(xa, va, xb, s, dt, free_flight, xs):
     # the step's interpolant at fraction s: the free flight of the positions at the velocities va (splitting), or
     # the straight segment from xa to xb
@@ -481,7 +469,7 @@ def interpolate(xa, va, xb, s, dt, free_flight, xs):
             xs[i] = xa[i] + s * (xb[i] - xa[i])
 
 
-@nb.njit(inline='always')
+@nb.njit(cache=CACHE)
 def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
     # Illinois regula falsi for the guard on the interpolant, bracketed on [0, 1]; returns s
     if g0 == 0.0:  # already on the guard (just reset there) and carried beyond: fires at once
@@ -519,7 +507,7 @@ def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
 
 @nb.njit(nogil=True, cache=CACHE)
 def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins, counts, gstat, track,
-               xa, va, xb, xs, xr, f, G, L):
+               vsum, fbad, xa, va, xb, xs, xr, f, G, L):
     """One whole step of the path ``x`` in ``mode`` through the general event loop; returns the mode after it.
 
     Every crossing inside the step is located on the step's interpolant and reset there, in time order, at most
@@ -607,9 +595,16 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
                 x[i] = xb[i]
             break
         interpolate(xa, va, xb, best_s, tau, free_flight, xs)
+        speed = abs(grate(best, xs, t + best_s * tau, p))
+        if not check(best, xs, t + best_s * tau, p):
+            # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
+            if counts[5] == 0:
+                fbad[0] = speed
+            counts[5] += 1
         if rec:
             events[best] += 1
-            vb = abs(grate(best, xs, t + best_s * tau, p)) * v_scale
+            vsum[best] += speed
+            vb = speed * v_scale
             if vb < v_bins:
                 vhist[best, int(vb)] += 1
             else:
@@ -640,6 +635,43 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
     return mode
 
 
+@nb.njit(cache=CACHE)
+def drive(x0, mode0, dws, dt, t0, p, scheme, out):
+    """Final states ``out`` (paths, N) of paths driven by given Brownian increments ``dws`` (paths, steps, M),
+    every step through ``event_step`` (for convergence tests: sums of fine increments drive a coarse grid along
+    the same Brownian path); returns the events handled."""
+    n_paths = dws.shape[0]
+    n_steps = dws.shape[1]
+    x = np.empty(N)
+    xa = np.empty(N)
+    va = np.empty(N)
+    xb = np.empty(N)
+    xs = np.empty(N)
+    xr = np.empty(N)
+    f = np.empty(N)
+    G = np.empty(N * M)
+    L = np.empty(N * M * M)
+    dw = np.empty(M)
+    counts = np.zeros(6, dtype=np.int64)
+    events = np.zeros(N_TRANS + 1, dtype=np.int64)
+    vhist = np.zeros((N_TRANS + 1, 1), dtype=np.int64)
+    gstat = np.zeros((N_TRANS + 1, 4))
+    vsum = np.zeros(N_TRANS + 1)
+    fbad = np.zeros(1)
+    for ip in range(n_paths):
+        for i in range(N):
+            x[i] = x0[i]
+        mode = mode0
+        for k in range(n_steps):
+            for j in range(M):
+                dw[j] = dws[ip, k, j]
+            mode = event_step(mode, x, t0 + k * dt, t0 + (k + 1) * dt, dt, dw, p, scheme, True, events, vhist, 0.0,
+                              0, counts, gstat, False, vsum, fbad, xa, va, xb, xs, xr, f, G, L)
+        for i in range(N):
+            out[ip, i] = x[i]
+    return events[:N_TRANS].sum()
+
+
 @nb.njit(nogil=True, cache=CACHE)
 def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, psums, pcount):
     """The lanes' observables into phase section ``kp`` (out of line: inside the kernel's loop it slowed the
@@ -667,7 +699,7 @@ def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, ps
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf, scheme,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
               v_scale, v_bins, vhist, counts, sums, sumsq, events, gstat, track, n_phase, phase_steps,
-              phist, psums, pcount):
+              phist, psums, pcount, vsum, fbad):
     """Paths of one chunk; histograms (with underflow bin 0 and overflow bin last), sums and event counts.
 
     Paths run in groups of LANES interleaved lanes (their independent dependency chains overlap in the CPU), each
@@ -681,8 +713,9 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 
     ``scheme``: 0 Euler-Maruyama, 1 Milstein (commutative noise), 2 splitting (kick, free flight, noise, kick), 3
     symplectic Milstein (the velocities' Milstein step, then the positions' free flight at the new velocities).
-    counts: [samples, event_overflow, outside, nonfinite, joint_outside]; events[j]: firings of transition j
-    after burn-in; vhist[j]: |rate of change of guard j| at its firings, overflow in the last bin.
+    counts: [samples, event_overflow, outside, nonfinite, joint_outside, bad_reset]; events[j]: firings of
+    transition j after burn-in; vhist[j]: |rate of change of guard j| (the speed) at its firings, overflow in the
+    last bin, and vsum[j] the sum of those speeds; fbad[0]: the speed at the first firing whose check failed.
     gstat[j], only when ``track`` (the step rule's pilot, which runs every step through ``event_step``), every
     step with burn-in: [sum of (g1 - g0)**2 over the steps tried, their number, min g0, max g0], how far one
     step moves a guard against the span of the guard over the paths.
@@ -733,7 +766,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {to_array_s}
 {store_dw}
                     mode = event_step(mode, x, t, _t1, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins,
-                                      counts, gstat, track, xa, va, xb, xs, xr, f, G, L)
+                                      counts, gstat, track, vsum, fbad, xa, va, xb, xs, xr, f, G, L)
                     ML[_l] = mode
                     SL[_l] = True  # until the next sample: its admissible-set check is not settled
 {reload}

@@ -60,7 +60,8 @@ class AutomatonJob:
                          a["p"], zx, zk, zf, a["scheme"], a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
                          a["v_bins"], out["vhist"], out["counts"], out["sums"], out["sumsq"], out["events"],
-                         out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"])
+                         out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"],
+                         out["vsum"], out["fbad"])
         return out
 
 

@@ -22,10 +22,11 @@ import sympy as sp
 from hybrid.errors import ModelError, ParameterError
 
 from . import _auto_codegen, _auto_exec, _rng
+from ._codegen import load_source
 from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, check_chunk_count
 from ._statistics import Estimate, ratio_estimate
 
-COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside")
+COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside", "bad_reset")
 """Names of the per-chunk counters, in the kernel's order."""
 
 
@@ -52,7 +53,7 @@ class AutomatonScheme:
         1.0
         """
         additive = st is not None and _additive(st)
-        if self.name == "em":
+        if self.name in ("em", "splitting"):  # neither has the Milstein correction
             return {"strong": 1.0 if additive else 0.5, "weak": 1.0}
         return {"strong": 1.0, "weak": 1.0}
 
@@ -150,6 +151,8 @@ class AutomatonEnsemble:
     phase_counts: dict | None = None
     phase_sums: np.ndarray | None = None
     phase_samples: np.ndarray | None = None
+    speed_sums: np.ndarray | None = None
+    first_bad_speed: float = 0.0
 
     def mean(self, name: str) -> Estimate:
         """Time-and-ensemble mean of an observable with a 95 % batch-means interval over chunks.
@@ -162,8 +165,19 @@ class AutomatonEnsemble:
         k = self.names.index(name)
         return ratio_estimate(self.chunk_sums[:, k], self.chunk_samples)
 
+    def _binned(self, name: str) -> None:
+        if name not in self.counts:
+            raise ParameterError(f"observable {name!r} was only summed (histograms[{name!r}] = None): it has a mean "
+                                 "but no histogram; give it a range (lo, hi, bins)")
+
+    def mean_speed(self, transition: str) -> float:
+        """Mean |rate of change of the guard| (the impact speed for a wall) at the firings of ``transition``."""
+        k = self.transitions.index(transition)
+        return float(self.speed_sums[k] / self.events[k]) if self.events[k] else float("nan")
+
     def density(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(edges, density) of an observable, normalised by *all* samples (the mass outside the edges is lost)."""
+        self._binned(name)
         c = self.counts[name]
         e = self.edges[name]
         total = self.flags["samples"]
@@ -171,6 +185,7 @@ class AutomatonEnsemble:
 
     def outside_fraction(self, name: str) -> float:
         """Share of samples below or above the histogram range of ``name``."""
+        self._binned(name)
         c = self.counts[name]
         return float((c[0] + c[-1]) / max(self.flags["samples"], 1))
 
@@ -254,6 +269,8 @@ class AutomatonEnsemble:
                                                     for k in self.phase_counts},
             None if self.phase_sums is None else np.concatenate([self.phase_sums, other.phase_sums]),
             None if self.phase_samples is None else np.concatenate([self.phase_samples, other.phase_samples]),
+            None if self.speed_sums is None else self.speed_sums + other.speed_sums,
+            self.first_bad_speed or other.first_bad_speed,
         )
 
     def to_pandas(self, name: str):
@@ -274,11 +291,51 @@ class AutomatonEnsemble:
             est = self.mean(nm)
             out[f"mean_{nm}"] = est.value
             out[f"mean_{nm}_ci"] = est.ci
-            out[f"outside_{nm}"] = self.outside_fraction(nm)
+            if nm in self.counts:
+                out[f"outside_{nm}"] = self.outside_fraction(nm)
         for tr in self.transitions:
             out[f"rate_{tr}"] = self.rate(tr)
         out.update({k: v for k, v in self.flags.items() if k != "samples"})
         return out
+
+
+def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params: dict | None = None,
+                    mode0: str | None = None, convention: str = "stratonovich") -> np.ndarray:
+    """Final states (paths, n) of paths driven by given Brownian increments ``increments`` (paths, steps, m).
+
+    For convergence tests: summing fine increments in blocks gives the same Brownian path on a coarser grid. Every
+    step goes through the kernel's general event loop; no statistics, no step rule.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> from hybrid import HybridAutomaton, Mode
+    >>> v = sp.Symbol("v")
+    >>> ou = HybridAutomaton((v,), {"c": 1.0}, [Mode("m", (-sp.Symbol("c") * v,), (1,))])
+    >>> drive_automaton(ou, "em", 0.1, np.zeros((2, 10, 1)), x0=(1.0,))[:, 0].round(4)  # doctest: +SKIP
+    array([0.3487, 0.3487])
+    """
+    if scheme not in AUTOMATON_SCHEMES:
+        raise ParameterError(f"unknown scheme {scheme!r}; use one of {sorted(AUTOMATON_SCHEMES)}")
+    sch = AUTOMATON_SCHEMES[scheme]
+    dt = _as_float("dt", dt)
+    src, st = _auto_codegen.generate_source(automaton, scheme, {}, convention)
+    sch.check(st)
+    dws = np.ascontiguousarray(increments, dtype=float)
+    n = len(st.states)
+    if dws.ndim != 3 or dws.shape[2] != st.n_noise:
+        raise ParameterError(f"increments must have shape (paths, steps, {st.n_noise}), got {dws.shape}")
+    x0 = np.array([float(v) for v in x0], dtype=float)
+    if x0.shape != (n,):
+        raise ParameterError(f"x0 must give {n} numbers, one per state {st.states}")
+    values = automaton.resolve_parameters(params)
+    modes = list(st.modes)
+    mode0 = automaton.initial_mode if mode0 is None else mode0
+    module, _ = load_source(f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}", src)
+    out = np.empty((dws.shape[0], n))
+    module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
+                 sch.code, out)
+    return out
 
 
 def _as_float(name, value, positive=True):
@@ -331,8 +388,9 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Root seed: chunk k draws from ``SeedSequence(seed).spawn(n_chunks)[k]``.
     observables : dict name -> expression, optional
         What to histogram and average (default: the automaton's observables).
-    histograms : dict name -> (lo, hi, bins)
-        Histogram range of each observable (required for each one).
+    histograms : dict name -> (lo, hi, bins) or None
+        Histogram range of each observable (required for each one); None: the observable is only summed (its mean,
+        and the joint histogram, cost one multiply-add per sample instead of a histogram update).
     joint : (name_x, name_y, (lo, hi, nx), (lo, hi, ny)), optional
         A joint histogram of two observables.
     speed_range : (lo, hi, bins)
@@ -442,7 +500,13 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     if missing:
         raise ParameterError(f"give a histogram range (lo, hi, bins) for the observables {missing}")
     lo, scale, bins = [], [], []
+    summed = tuple(k for k in obs if histograms[k] is None)
     for k in obs:
+        if k in summed:
+            lo.append(0.0)
+            scale.append(1.0)
+            bins.append(1)
+            continue
         try:
             a, b, nb_ = histograms[k]
             a, b, nb_ = float(a), float(b), int(nb_)
@@ -477,7 +541,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     if mode0 not in mode_names:
         raise ParameterError(f"mode0={mode0!r} is not one of {mode_names}")
 
-    src, st = _auto_codegen.generate_source(automaton, scheme, obs, convention)
+    src, st = _auto_codegen.generate_source(automaton, scheme, obs, convention, summed=summed)
     sch.check(st)
     name = f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}"
     ckdir = Path(checkpoint) if checkpoint is not None else None
@@ -504,6 +568,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         "sums": ((n_obs,), float, 0.0), "sumsq": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
         "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((n_ph, n_obs, width), i64, 0),
         "psums": ((n_ph, n_obs), float, 0.0), "pcount": ((n_ph,), i64, 0),
+        "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
     }
     args = dict(n_burn=n_burn, n_samp=n_samp, stride=stride, dt=dt, x0=x0, mode0=mode_names.index(mode0),
                 p=np.array([values[k] for k in st.params], dtype=float), scheme=sch.code,
@@ -555,9 +620,10 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     jhist = rows["jhist"] if joint is not None else None
     phist, psums, pcount = rows["phist"], rows["psums"], rows["pcount"]
     flags = {nm: int(counts[:, i].sum()) for i, nm in enumerate(COUNT_NAMES)}
-    edges = {nm: np.linspace(lo[i], lo[i] + bins[i] / scale[i], bins[i] + 1) for i, nm in enumerate(names)}
+    edges = {nm: np.linspace(lo[i], lo[i] + bins[i] / scale[i], bins[i] + 1) for i, nm in enumerate(names)
+             if nm not in summed}
     hsum = hist.sum(axis=0)
-    cts = {nm: hsum[i, : bins[i] + 2].copy() for i, nm in enumerate(names)}
+    cts = {nm: hsum[i, : bins[i] + 2].copy() for i, nm in enumerate(names) if nm not in summed}
     jres = None
     if joint is not None:
         jres = (names[jx], names[jy], np.linspace(j_lo[0], j_lo[0] + j_bins[0] / j_scale[0], j_bins[0] + 1),
@@ -574,11 +640,13 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         names, edges, cts, jres, tuple(t.name for t in st.transitions), events.sum(axis=0)[:n_tr],
         np.linspace(0.0, float(v_hi), int(v_bins) + 1), vhist.sum(axis=0)[:n_tr], sums[:, : len(names)],
         counts[:, 0].astype(float), flags, settings, time.perf_counter() - t0_wall,
-        sampled_time=float(paths) * n_samp * stride * dt,
+        sampled_time=float(paths) * n_samp * stride * dt, speed_sums=rows["vsum"].sum(axis=0)[:n_tr],
+        first_bad_speed=float(next((r[0] for r, c in zip(rows["fbad"], counts[:, 5]) if c), 0.0)),
     )
     if phases:
         psum_all = phist.sum(axis=0)
-        ens.phase_counts = {nm: psum_all[:, i, : bins[i] + 2].copy() for i, nm in enumerate(names)}
+        ens.phase_counts = {nm: psum_all[:, i, : bins[i] + 2].copy() for i, nm in enumerate(names)
+                            if nm not in summed}
         ens.phase_sums = psums[:, :, : len(names)]
         ens.phase_samples = pcount.astype(float)
     _warn(ens)
@@ -680,10 +748,14 @@ def _warn(ens: AutomatonEnsemble) -> None:
                       f"{CHATTER_IMPACTS_PER_STEP}); rates and guard statistics are not resolved by "
                       f"dt={ens.settings['dt']:g}; reduce dt until they stop changing", ChatteringWarning,
                       stacklevel=3)
+    if ens.flags["bad_reset"]:
+        warnings.warn(f"{ens.flags['bad_reset']} firings failed their transition's check (first at speed "
+                      f"{ens.first_bad_speed:.4g}): the reset is outside what the model declares valid there",
+                      VibroWarning, stacklevel=3)
     if ens.flags["nonfinite"]:
         warnings.warn(f"{ens.flags['nonfinite']} observable values were not finite (paths diverged?)", VibroWarning,
                       stacklevel=3)
-    for nm in ens.names:
+    for nm in ens.counts:
         out = ens.outside_fraction(nm)
         if out > 1e-3:
             warnings.warn(f"{out:.2%} of the samples of {nm!r} fall outside its histogram range (counted in the "

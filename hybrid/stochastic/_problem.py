@@ -75,6 +75,10 @@ class MonteCarloAlgorithm:
         Apply the step rule (refuse a step that can jump across the gap, warn on a coarse one).
     precision : {"f64", "f32"}
         Floating point of the kernel (``f32`` only on the ``cuda`` scheduler).
+    kernel : {"auto", "automaton", "oscillator"}
+        Which generated CPU kernel runs the scheme: the one generated from ``model.to_automaton()`` for every
+        automaton, or the oscillator's own. ``auto`` takes the automaton kernel wherever it reproduces the scheme
+        (``milstein`` with a restitution law given as an expression: the same paths up to rounding).
 
     Examples
     --------
@@ -86,6 +90,7 @@ class MonteCarloAlgorithm:
     dt: float = 1e-3
     check_dt: bool = True
     precision: str = "f64"
+    kernel: str = "auto"
 
     def with_(self, **changes) -> MonteCarloAlgorithm:
         """A copy with some fields changed."""

@@ -34,7 +34,7 @@ from hybrid.errors import (
 )
 from hybrid.io import atomic_write
 
-from . import _codegen, _rng
+from . import _codegen, _front, _rng
 from ._problem import MAX_MEMORY, MAX_PATH_STEPS, EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
@@ -366,21 +366,26 @@ class _Job:
         self.name = kern.module.__name__
         self.prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
         self.rprm = np.array(kern.law_values, dtype=float)
+        self.scalars = self.scales(model, s)
+        self.seed = s["seed"]
+        self.n_chunks = s["n_chunks"]
+        self.paths = s["paths"]
+        self.chunk_paths = s["chunk_paths"]
+
+    @staticmethod
+    def scales(model, s: dict) -> dict:
+        """The kernel's scalar arguments: steps, start, walls and bin scales (shared with the automaton kernel)."""
         left, right = model.barriers
         xy = s["xy_bins"]
         (xlo, xhi), (ylo, yhi) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
         nx, ny = xy if xy is not None else (1, 1)
-        self.scalars = dict(
+        return dict(
             n_burn=s["n_burn"], n_samp=s["n_samp"], stride=s["stride"], dt=s["dt"], x0=s["x0"][0], y0=s["x0"][1],
             wl=float(left), wr=float(right), h_scale=_bin_scale(0.0, s["h_max"], s["bins"]), hbins=s["bins"],
             g_bar=s["g_barrier"], xlo=float(xlo), x_scale=_bin_scale(xlo, xhi, nx), nx=nx, ylo=float(ylo),
             y_scale=_bin_scale(ylo, yhi, ny), ny=ny, do_xy=xy is not None,
             v_scale=_bin_scale(0.0, s["v_max"], s["v_bins"]), vbins=s["v_bins"],
         )
-        self.seed = s["seed"]
-        self.n_chunks = s["n_chunks"]
-        self.paths = s["paths"]
-        self.chunk_paths = s["chunk_paths"]
 
     def npaths(self, ids):
         ids = np.asarray(ids, dtype=np.int64)
@@ -537,7 +542,8 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
                       bins=400, xy_bins=(80, 80), xy_range=None, stride=1, progress=False, checkpoint=None,
                       resume=False, scheduler=None, *, chunk_paths=None, checkpoint_every=4, v_bins=200, v_max=None,
                       x0=(0.0, 0.0), check_dt=True, max_path_steps=MAX_PATH_STEPS, max_memory=MAX_MEMORY,
-                      precision="f64", threads_per_block=128, launch_steps=None) -> EnsembleStatistics:
+                      precision="f64", threads_per_block=128, launch_steps=None,
+                      kernel="auto") -> EnsembleStatistics:
     """Simulate an ensemble of paths of ``model`` and return streaming statistics (no paths are stored).
 
     Parameters
@@ -571,6 +577,10 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         Floating point of the ``cuda`` kernel (the CPU kernels are double only).
     threads_per_block, launch_steps : int
         ``cuda`` only: block size and steps per kernel launch; neither changes any number.
+    kernel : {"auto", "automaton", "oscillator"}
+        The CPU kernel: ``auto`` (default) runs ``milstein`` with a law given as an expression on the kernel
+        generated from ``model.to_automaton()`` (its ``symplectic`` scheme: the same paths up to rounding), every
+        other case on the oscillator's own kernel; ``settings['kernel']`` says which ran.
     check_dt : bool
         Apply :func:`check_step` (refuse or warn on coarse steps).
     max_path_steps, max_memory : float
@@ -605,7 +615,7 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     """
     problem = EnsembleProblem(model, x0=x0, t_end=t_end, t_burn=t_burn, h_max=h_max, bins=bins, xy_bins=xy_bins,
                               xy_range=xy_range, v_bins=v_bins, v_max=v_max, stride=stride)
-    algorithm = MonteCarloAlgorithm(scheme=scheme, dt=dt, check_dt=check_dt, precision=precision)
+    algorithm = MonteCarloAlgorithm(scheme=scheme, dt=dt, check_dt=check_dt, precision=precision, kernel=kernel)
     execution = Execution(paths=paths, seed=seed, chunk_paths=chunk_paths, scheduler=scheduler, progress=progress,
                           checkpoint=checkpoint, resume=resume, checkpoint_every=checkpoint_every,
                           max_path_steps=max_path_steps, max_memory=max_memory,
@@ -686,7 +696,27 @@ def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execu
     if ex.resume and ex.checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
     _positive_int("checkpoint_every", ex.checkpoint_every)
+    settings["kernel"] = _choose_kernel(model, sch, algorithm.kernel, gpu)
     return sch, settings
+
+
+def _choose_kernel(model, sch, kernel, gpu: bool) -> str:
+    """The CPU kernel that runs the scheme: 'automaton' where it reproduces it (and was not declined), else
+    'oscillator'; 'cuda' on the GPU."""
+    if kernel not in _front.KERNELS:
+        raise ParameterError(f"kernel={kernel!r}; use one of {list(_front.KERNELS)}")
+    if gpu:
+        return "cuda"
+    if kernel == "oscillator":
+        return "oscillator"
+    if _front.reproduces(model, sch):
+        return "automaton"
+    if kernel == "automaton":
+        raise ParameterError(
+            f"kernel='automaton' runs the scheme 'milstein' with a restitution law given as an expression (as the "
+            f"automaton's 'symplectic' scheme); scheme {sch.name!r} with {model.restitution!r} runs on the oscillator "
+            "kernel: use kernel='auto', or simulate_automaton(model.to_automaton(), ...) for the automaton schemes")
+    return "oscillator"
 
 
 def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics:
@@ -705,9 +735,16 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
             "checkpoint could be resumed with another law; run without a checkpoint or declare the law as an "
             "expression of v"
         )
-    kern = _codegen.build_kernel(model, sch)
-    settings["identity"] = {**kern.identity, "params": {k: float.hex(float(model.params[k])) for k in kern.param_names}}
-    job = _Job(model, kern, settings)
+    if settings["kernel"] == "automaton":
+        probe = _Job.scales(model, settings)
+        kern, job = _front.build(model, settings, probe["h_scale"], probe["v_scale"],
+                                 (probe["x_scale"], probe["y_scale"]))
+        names = tuple(model.params)
+    else:
+        kern = _codegen.build_kernel(model, sch)
+        job = _Job(model, kern, settings)
+        names = kern.param_names
+    settings["identity"] = {**kern.identity, "params": {k: float.hex(float(model.params[k])) for k in names}}
     states = _rng.chunk_states(settings["seed"], settings["n_chunks"])
 
     stats = None

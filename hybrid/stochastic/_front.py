@@ -1,0 +1,208 @@
+"""Oscillator ensembles through the automaton kernel: ``ImpactOscillator`` as a front end of one generated path.
+
+``simulate_ensemble`` with the scheme ``milstein`` builds ``model.to_automaton()`` and runs it on the kernel that
+:mod:`._auto_codegen` generates for every automaton, with that kernel's ``symplectic`` scheme: the velocity's
+Milstein step, then the free flight of the position at the new velocity with each wall crossing located exactly and
+the restitution law applied there. That is the oscillator kernel's ``milstein`` step for step, and chunk k draws the
+same normals in the same order (lanes of 8 paths), so the two kernels give the same paths up to rounding (the test
+compares histograms bin for bin). Each chunk's automaton statistics are converted into the rows of
+:class:`EnsembleStatistics`, so checkpoints, merging, confidence intervals and the result checks are shared.
+
+The oscillator kernel stays for what the automaton kernel does not reproduce: ``splitting`` (its exact
+Ornstein-Uhlenbeck velocity step), ``em`` (it keeps the step's increment across an impact), ``naive``, a restitution
+law given as a Python callable (the automaton kernel needs a symbolic reset), the GPU, and the driven or stored
+paths of ``drive_paths`` / ``sample_paths``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+
+import numpy as np
+import sympy as sp
+
+from hybrid.automaton import real_symbol
+
+from . import _auto_codegen, _auto_exec, _rng
+from ._statistics import COUNTS, SUMS
+
+KERNELS = ("auto", "automaton", "oscillator")
+"""Values of ``MonteCarloAlgorithm.kernel``: ``auto`` takes the automaton kernel wherever it reproduces the scheme."""
+
+_X, _Y = real_symbol("x"), real_symbol("y")
+_SUMMED = ("x2", "y2", "below", "x", "y")
+
+
+def reproduces(model, scheme) -> bool:
+    """True when the automaton kernel reproduces ``scheme`` on ``model`` (milstein, a law given as an expression).
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> from hybrid.stochastic import SCHEMES
+    >>> reproduces(DuffingImpact(), SCHEMES["milstein"]), reproduces(DuffingImpact(), SCHEMES["splitting"])
+    (True, False)
+    """
+    return scheme.name == "milstein" and getattr(model.restitution, "callable", None) is None
+
+
+class AutomatonKernel:
+    """What the oscillator runner needs of a kernel: the loaded module, its path, identity and build time."""
+
+    def __init__(self, job: _auto_exec.AutomatonJob, module, identity: dict, compile_time: float):
+        self.job, self.module, self.identity, self.compile_time = job, module, identity, compile_time
+        self.path = getattr(module, "__file__", None)
+        self.source = job.src
+
+
+class AutomatonChunks:
+    """Runs chunks of an oscillator ensemble on the automaton kernel and returns them as oscillator rows.
+
+    Picklable (for Dask): the automaton job (its kernel source and arguments) and the restitution law, which gives
+    e at the first impact whose coefficient fell outside (0, 1].
+    """
+
+    def __init__(self, job: _auto_exec.AutomatonJob, settings: dict, law, transitions: tuple):
+        self.job, self.law = job, law
+        self.name = job.name
+        self.seed = settings["seed"]
+        self.bins, self.v_bins = settings["bins"], settings["v_bins"]
+        self.xy_bins = settings["xy_bins"]
+        self.left = transitions.index("left") if "left" in transitions else -1
+        self.right = transitions.index("right") if "right" in transitions else -1
+
+    def run(self, ids, states, module=None):
+        """Run chunks ``ids`` (with their RNG ``states``); the per-chunk arrays of the oscillator kernel."""
+        if module is None:
+            module = self.job.module()
+        n, bins, vb = len(ids), self.bins, self.v_bins
+        nx, ny = self.xy_bins if self.xy_bins is not None else (1, 1)
+        hist = np.zeros((n, bins), np.int64)
+        xyh = np.zeros((n, ny, nx), np.int64)
+        vh = np.zeros((n, vb), np.int64)
+        cnt = np.zeros((n, len(COUNTS)), np.int64)
+        sm = np.zeros((n, len(SUMS)))
+        c, s = COUNTS.index, SUMS.index
+        for i, k in enumerate(ids):
+            out = self.job.run(int(k), np.array(states[i], dtype=np.uint64), module=module)
+            h, counts, sums, events = out["hist"][0], out["counts"], out["sums"], out["events"]
+            hist[i] = h[1: bins + 1]
+            if self.xy_bins is not None:
+                xyh[i] = out["jhist"]
+            vh[i] = out["vhist"][:, :vb].sum(axis=0)
+            row = {"samples": counts[0], "below": int(round(sums[3])), "h_over": h[bins + 1], "h_under": h[0],
+                   "xy_out": counts[4], "v_over": out["vhist"][:, vb].sum(), "violations": counts[2],
+                   "stuck": counts[1], "nonfinite": counts[3], "bad_e": counts[5], "v_under": 0,
+                   "impacts_left": events[self.left] if self.left >= 0 else 0,
+                   "impacts_right": events[self.right] if self.right >= 0 else 0}
+            for key, value in row.items():
+                cnt[i, c(key)] = value
+            sm[i, s("H")], sm[i, s("x2")], sm[i, s("y2")] = sums[0], sums[1], sums[2]
+            sm[i, s("impact_speed")] = out["vsum"].sum()
+            if counts[5]:
+                v = float(out["fbad"][0])
+                sm[i, s("bad_e_speed")] = v
+                sm[i, s("bad_e_value")] = float(np.asarray(self.law.coefficient(np.array([v])), dtype=float)[0])
+        ids = np.asarray(ids, np.int64)
+        return ids, self.job.npaths[ids], hist, xyh, vh, cnt, sm
+
+
+def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple) -> tuple:
+    """Generate and compile the automaton kernel of ``model`` for the run ``settings``.
+
+    ``h_scale``, ``v_scale`` and ``xy_scales`` (x_scale, y_scale) are the oscillator runner's bin scales, so that
+    both kernels bin alike. Returns ``(AutomatonKernel, AutomatonChunks)``.
+    """
+    t0 = time.perf_counter()
+    automaton = lift_law_numbers(model.to_automaton())
+    energy = model.energy_expr
+    walls = [b for b in (model.barrier_exprs or ()) if b.is_finite is not False and b not in (sp.oo, -sp.oo)]
+    if walls:
+        g_bar = sp.Min(*[model.potential_expr.subs(_X, w) for w in walls])
+        below = sp.Piecewise((1, energy < g_bar), (0, True))
+    else:
+        below = sp.Integer(1)
+    observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
+    src, st = _auto_codegen.generate_source(automaton, "symplectic", observables, summed=_SUMMED)
+    name = f"vibro_auto_symplectic_{_auto_codegen.source_hash(src)}"
+    s = settings
+    n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
+    npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
+    xy = s["xy_bins"]
+    (xlo, _), (ylo, _) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
+    nx, ny = xy if xy is not None else (1, 1)
+    n_tr = len(st.transitions)
+    n_obs = len(observables)
+    i64 = np.int64
+    shapes = {
+        "hist": ((n_obs, s["bins"] + 2), i64, 0), "jhist": ((ny, nx), i64, 0),
+        "vhist": ((max(n_tr, 1), s["v_bins"] + 1), i64, 0), "counts": ((6,), i64, 0),
+        "sums": ((n_obs,), float, 0.0), "sumsq": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
+        "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((1, n_obs, s["bins"] + 2), i64, 0),
+        "psums": ((1, n_obs), float, 0.0), "pcount": ((1,), i64, 0),
+        "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
+    }
+    names = list(observables)
+    ones = np.ones(n_obs)
+    scale = ones.copy()
+    scale[0] = h_scale
+    bins = np.ones(n_obs, dtype=np.int64)
+    bins[0] = s["bins"]
+    args = dict(
+        n_burn=s["n_burn"], n_samp=s["n_samp"], stride=s["stride"], dt=s["dt"], x0=np.array(s["x0"], dtype=float),
+        mode0=0, p=np.array([automaton.parameters[k] for k in st.params], dtype=float),
+        scheme=_auto_runner_code("symplectic"), obs_lo=np.zeros(n_obs), obs_scale=scale, obs_bins=bins,
+        jx=names.index("x") if xy is not None else -1, jy=names.index("y") if xy is not None else -1,
+        j_lo=np.array([xlo, ylo], dtype=float), j_scale=np.array(xy_scales, dtype=float),
+        j_bins=np.array([nx, ny], dtype=np.int64), v_scale=v_scale, v_bins=s["v_bins"], phases=0, phase_steps=1,
+    )
+    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
+    module = job.module()
+    job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
+    # the law's numbers in full precision (they are parameters of the kernel, not in its source)
+    law = [float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")]
+    identity = {"kernel": hashlib.sha256(src.encode()).hexdigest()[:32], "law": [model.restitution.spec(), *law]}
+    kern = AutomatonKernel(job, module, identity, time.perf_counter() - t0)
+    return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
+
+
+def lift_law_numbers(automaton):
+    """The automaton with every number in its resets and checks (the restitution law's r, V_C, ...) made a parameter
+    ``_law0, _law1, ...``: the kernel's source, and so its compiled code, is then the same for every value.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact, Newton
+    >>> a = lift_law_numbers(DuffingImpact(restitution=Newton(0.7)).to_automaton())
+    >>> [k for k in a.parameters if k.startswith("_law")]
+    ['_law0']
+    """
+    from hybrid.automaton import HybridAutomaton, Transition
+
+    values: dict = {}
+
+    def lift(expr):
+        if expr is None:
+            return None
+        subs = {}
+        for atom in sp.preorder_traversal(expr):
+            if isinstance(atom, sp.Float) and atom not in subs:
+                if atom not in values:
+                    values[atom] = real_symbol(f"_law{len(values)}")
+                subs[atom] = values[atom]
+        return expr.xreplace(subs)
+
+    transitions = [Transition(t.name, t.source, t.target, t.guard, t.direction,
+                              tuple(lift(r) for r in t.reset) if t.symbolic_reset else t.reset, t.priority,
+                              check=lift(t.check)) for t in automaton.transitions]
+    params = dict(automaton.parameters)
+    params.update({sym.name: float(num) for num, sym in values.items()})
+    return HybridAutomaton(automaton.states, params, list(automaton.modes), transitions,
+                           initial_mode=automaton.initial_mode, observables=dict(automaton.observables))
+
+
+def _auto_runner_code(name: str) -> int:
+    from ._auto_runner import AUTOMATON_SCHEMES
+
+    return AUTOMATON_SCHEMES[name].code

@@ -1,0 +1,162 @@
+"""ImpactOscillator as a front end of the automaton kernel, and the automaton kernel's symplectic scheme.
+
+- ``simulate_ensemble(..., "milstein")`` runs on the kernel generated from ``model.to_automaton()`` (its
+  ``symplectic`` scheme) and gives the oscillator kernel's numbers: the same histograms bin for bin, the same impact
+  counts and means, on symmetric, one-sided and equilibrium walls and with the Newton and Ma laws.
+- The symplectic scheme keeps the Gibbs density of an impact pair with elastic impacts (the n-DOF oracle) and,
+  unlike the explicit em, does not pump energy into a lightly damped oscillator.
+- Transition checks (the restitution coefficient in (0, 1]) are counted and reported; observables given no
+  histogram are summed only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from hybrid import HybridAutomaton, Mode, Transition
+from hybrid.errors import ParameterError, VibroWarning
+from hybrid.stochastic import AUTOMATON_SCHEMES, simulate_automaton, simulate_ensemble
+from models import DuffingImpact, ImpactOscillator, Ma, Newton
+
+TOTALS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out", "v_over", "violations",
+          "stuck", "nonfinite", "h_under", "v_under", "bad_e")
+
+
+@pytest.mark.parametrize("model", [
+    DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0),
+    DuffingImpact(restitution=Newton(0.7), a=1.0, b=0.2, c=0.05, D=0.05, delta=0.8),
+    ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None), restitution=Newton(0.8)),
+    ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
+                     restitution=Ma(0.2)),
+], ids=["ma-symmetric", "newton-symmetric", "equilibrium-stop", "one-sided"])
+def test_milstein_runs_on_the_automaton_kernel_with_the_oscillator_kernels_numbers(model):
+    kw = dict(dt=2e-3, paths=16, t_end=200.0, t_burn=20.0, seed=3, chunk_paths=8, bins=80, v_bins=50)
+    new = simulate_ensemble(model, "milstein", **kw)
+    old = simulate_ensemble(model, "milstein", kernel="oscillator", **kw)
+    assert new.settings["kernel"] == "automaton" and old.settings["kernel"] == "oscillator"
+    assert new.impacts > 50  # the walls are hit: the reset is compared, not only the flight
+    # the same normals in the same order and the same step: identical paths up to rounding, so identical bins
+    np.testing.assert_array_equal(new.h_counts, old.h_counts)
+    np.testing.assert_array_equal(new.xy_counts, old.xy_counts)
+    np.testing.assert_array_equal(new.v_counts, old.v_counts)
+    assert {k: new.total(k) for k in TOTALS} == {k: old.total(k) for k in TOTALS}
+    for a, b in ((new.mean_energy, old.mean_energy), (new.mean_x2, old.mean_x2),
+                 (new.mean_impact_speed, old.mean_impact_speed)):
+        assert a.value == pytest.approx(b.value, rel=1e-12) and a.ci == pytest.approx(b.ci, rel=1e-9)
+
+
+def test_kernel_choice_is_checked_and_reported():
+    m = DuffingImpact()
+    kw = dict(dt=0.01, paths=2, t_end=2.0, t_burn=0.0, xy_bins=None)
+    with pytest.raises(ParameterError, match="kernel="):
+        simulate_ensemble(m, "milstein", kernel="fast", **kw)
+    with pytest.raises(ParameterError, match="scheme 'splitting'"):
+        simulate_ensemble(m, "splitting", kernel="automaton", **kw)
+    with pytest.warns(VibroWarning):  # two chunks only: the CI warning
+        assert simulate_ensemble(m, "splitting", **kw).settings["kernel"] == "oscillator"
+    from models import CustomRestitution
+
+    law = CustomRestitution(lambda v: 0.8)  # a callable law has no symbolic reset: the oscillator kernel runs it
+    with pytest.warns(VibroWarning):
+        assert simulate_ensemble(DuffingImpact(restitution=law), "milstein", **kw).settings["kernel"] == "oscillator"
+
+
+X, Y = sp.symbols("x y")
+
+
+def test_a_failed_transition_check_is_counted_and_reported():
+    base = DuffingImpact(restitution=Newton(0.8)).to_automaton()
+    checked = HybridAutomaton(
+        base.states, dict(base.parameters), list(base.modes),
+        [Transition(t.name, t.source, t.target, t.guard, t.direction, t.reset, t.priority, check=sp.Abs(Y) < 0.5)
+         for t in base.transitions], observables=dict(base.observables))
+    kw = dict(dt=2e-3, paths=8, t_end=100.0, x0=(0.0, 0.0), seed=1, histograms={"H": (0.0, 4.0, 40)})
+    with pytest.warns(VibroWarning, match="failed their transition's check"):
+        ens = simulate_automaton(checked, "symplectic", **kw)
+    # firings surely above speed 0.5, from the speed histogram (bins starting at 0.5 or higher, and the overflow)
+    fast = ens.speed_counts[:, :-1][:, ens.speed_edges[:-1] >= 0.5].sum() + ens.speed_counts[:, -1].sum()
+    assert ens.flags["bad_reset"] >= fast > 0 and ens.first_bad_speed >= 0.5
+    assert simulate_automaton(base, "symplectic", **kw).flags["bad_reset"] == 0
+
+
+def test_summed_observables_have_means_but_no_histogram():
+    a = DuffingImpact().to_automaton()
+    kw = dict(dt=5e-3, paths=16, t_end=60.0, t_burn=5.0, x0=(0.0, 0.0), seed=2, chunk_paths=2)
+    both = simulate_automaton(a, "symplectic", observables={"H": a.observables["H"], "x2": X**2},
+                              histograms={"H": (0.0, 4.0, 40), "x2": (0.0, 2.0, 10)}, **kw)
+    summed = simulate_automaton(a, "symplectic", observables={"H": a.observables["H"], "x2": X**2},
+                                histograms={"H": (0.0, 4.0, 40), "x2": None}, **kw)
+    assert summed.mean("x2").value == both.mean("x2").value
+    np.testing.assert_array_equal(summed.counts["H"], both.counts["H"])
+    with pytest.raises(ParameterError, match="only summed"):
+        summed.density("x2")
+
+
+def test_symplectic_scheme_does_not_pump_energy_where_explicit_em_does():
+    # x'' + c x' + x = sqrt(2D) xi without walls: E[H] = D / c exactly. Explicit EM adds energy at a rate of about
+    # dt * omega**2 per unit time against the damping's c: a relative bias of order dt / c = 0.4 here.
+    c, D, dt = 0.05, 0.05, 0.02
+    mode = Mode("m", (Y, -X - sp.Symbol("c") * Y), (0, sp.sqrt(2 * sp.Symbol("D"))))
+    osc = HybridAutomaton((X, Y), {"c": c, "D": D}, [mode], observables={"H": (X**2 + Y**2) / 2})
+    kw = dict(dt=dt, paths=64, t_end=2000.0, t_burn=100.0, x0=(0.0, 0.0), seed=4, histograms={"H": (0.0, 10.0, 20)})
+    symp = simulate_automaton(osc, "symplectic", **kw).mean("H")
+    em = simulate_automaton(osc, "em", **kw).mean("H")
+    exact = D / c
+    assert abs(symp.value - exact) < 3 * symp.ci + 0.02 * exact, (symp, exact)
+    assert em.value - exact > 0.2 * exact, (em, exact)
+    assert AUTOMATON_SCHEMES["symplectic"].orders(None)["strong"] == 1.0
+
+
+def test_symplectic_scheme_keeps_the_gibbs_marginal_of_an_impact_pair():
+    from scipy import special
+    from test_automaton_mc import impact_pair
+
+    gap, th, k1, k2 = 0.2, 0.05, 1.0, 0.6
+    ens = simulate_automaton(impact_pair(), "symplectic", dt=0.01, paths=64, t_end=600.0, t_burn=30.0,
+                             x0=(0, 0, 0, 0), seed=12, histograms={"z": (-gap, gap, 20), "kinetic": (0, 1, 10)})
+    assert ens.flags["outside"] == 0 and ens.events.sum() > 1000
+    sd = math.sqrt(th * (1 / k1 + 1 / k2))
+    cdf = 0.5 * (1 + special.erf(ens.edges["z"] / (sd * math.sqrt(2))))
+    exact = np.diff(cdf) / (cdf[-1] - cdf[0])
+    mc = ens.counts["z"][1:-1] / ens.flags["samples"]
+    assert np.abs(mc - exact).sum() < 0.03
+
+
+def _two_dof(multiplicative: bool):
+    """Two masses on springs, damped, one noise on v1 (proportional to v1 when ``multiplicative``)."""
+    x1, x2, v1, v2 = sp.symbols("x1 x2 v1 v2")
+    k1, k2, c, s = (sp.Symbol(n) for n in ("k1", "k2", "c", "s"))
+    flow = (v1, v2, -k1 * x1 - k2 * (x1 - x2) - c * v1, -k2 * (x2 - x1) - c * v2)
+    g = s * v1 if multiplicative else s
+    return HybridAutomaton((x1, x2, v1, v2), {"k1": 1.0, "k2": 0.5, "c": 0.4, "s": 1.0},
+                           [Mode("m", flow, (0, 0, g, 0))])
+
+
+@pytest.mark.parametrize("scheme, multiplicative, order", [
+    ("em", True, 0.5), ("milstein", True, 1.0), ("symplectic", True, 1.0), ("splitting", True, 0.5),
+    ("em", False, 1.0)])
+def test_strong_orders_fitted_on_a_two_degree_of_freedom_system(scheme, multiplicative, order):
+    # each scheme against itself at dt / 16 along the same Brownian path (sums of the fine increments); measured
+    # slopes: em 0.53, milstein 0.99, symplectic 1.04, splitting 0.47 (multiplicative), em 1.0 (additive)
+    from hybrid.stochastic import drive_automaton
+    from hybrid.stochastic._auto_codegen import analyse
+
+    automaton = _two_dof(multiplicative)
+    T, fine, paths = 1.0, 2**11, 256
+    dw = np.random.default_rng(5).standard_normal((paths, fine, 1)) * math.sqrt(T / fine)
+    x0 = (0.5, -0.2, 0.0, 0.3)
+    ref = drive_automaton(automaton, scheme, T / fine, dw, x0)
+    levels = [2**k for k in range(3, 8)]
+    errors = []
+    for n in levels:  # the same Brownian path on the coarse grid: sums of fine increments
+        coarse = dw.reshape(paths, n, fine // n, 1).sum(axis=2)
+        end = drive_automaton(automaton, scheme, T / n, coarse, x0)
+        errors.append(math.sqrt(np.mean(np.sum((end - ref) ** 2, axis=1))))
+    slope = -np.polyfit(np.log(levels), np.log(errors), 1)[0]
+    declared = AUTOMATON_SCHEMES[scheme].orders(analyse(automaton))["strong"]
+    assert declared == order
+    assert slope == pytest.approx(order, abs=0.15), (errors, slope)
