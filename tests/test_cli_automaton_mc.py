@@ -123,6 +123,7 @@ def test_a_user_function_and_instance_run_with_their_observables(tmp, capsys):
 
 
 BAD = [
+    (["--model", "duffing", "--scheme", "symplectic"], "--scheme milstein runs the same step"),
     (["--model", "{tmp}/missing.py:f"], "does not exist"),
     (["--model", "{tmp}/user.py:NOT"], "is not a model"),
     (["--model", "{tmp}/user.py:nothing"], "has no object named"),

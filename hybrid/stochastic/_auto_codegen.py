@@ -346,11 +346,11 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     ind = textwrap.indent
     src = _TEMPLATE.format(
         unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + [
-            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0\n_sq{o} = 0.0"
+            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
             for o in range(len(obs))]) or "pass", " " * 4),
         binning=ind("\n".join((_SUMMING if name in summed else _BINNING).format(o=o)
                                for o, name in enumerate(observables)) or "pass", " " * 16),
-        flush=ind("\n".join(f"sums[{o}] += _sum{o}\nsumsq[{o}] += _sq{o}" for o in range(len(obs))) or "pass",
+        flush=ind("\n".join(f"sums[{o}] += _sum{o}" for o in range(len(obs))) or "pass",
                   " " * 4),
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
         init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
@@ -393,8 +393,7 @@ elif _v == _v:
 else:
     counts[3] += 1
     _v = 0.0
-_sum{o} += _v
-_sq{o} += _v * _v"""
+_sum{o} += _v"""
 
 
 _SUMMING = """\
@@ -402,8 +401,7 @@ _v = ob[{o}]
 if _v != _v:
     counts[3] += 1
     _v = 0.0
-_sum{o} += _v
-_sq{o} += _v * _v"""
+_sum{o} += _v"""
 
 
 def source_hash(src: str) -> str:
@@ -698,7 +696,7 @@ def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, ps
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf, scheme,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
-              v_scale, v_bins, vhist, counts, sums, sumsq, events, gstat, track, n_phase, phase_steps,
+              v_scale, v_bins, vhist, counts, sums, events, gstat, track, n_phase, phase_steps,
               phist, psums, pcount, vsum, fbad):
     """Paths of one chunk; histograms (with underflow bin 0 and overflow bin last), sums and event counts.
 

@@ -21,9 +21,10 @@ from hybrid.io import atomic_write
 from . import _codegen, _rng
 
 CHECKPOINT_FILE = "automaton_checkpoint.npz"
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2
+"""2: speed sums, first failed check, no sums of squares (never read)."""
 
-PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "sumsq", "events", "gstat", "phist", "psums", "pcount")
+PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "events", "gstat", "phist", "psums", "pcount")
 """The kernel's per-chunk outputs, in its argument order."""
 
 
@@ -59,7 +60,7 @@ class AutomatonJob:
         module.run_chunk(rng_state, self.npaths[k], burn, samples, a["stride"], a["dt"], 0.0, a["x0"], a["mode0"],
                          a["p"], zx, zk, zf, a["scheme"], a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
-                         a["v_bins"], out["vhist"], out["counts"], out["sums"], out["sumsq"], out["events"],
+                         a["v_bins"], out["vhist"], out["counts"], out["sums"], out["events"],
                          out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"],
                          out["vsum"], out["fbad"])
         return out

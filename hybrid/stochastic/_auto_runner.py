@@ -565,7 +565,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     shapes = {
         "hist": ((n_obs, width), i64, 0), "jhist": ((int(j_bins[1]), int(j_bins[0])), i64, 0),
         "vhist": ((max(n_tr, 1), int(v_bins) + 1), i64, 0), "counts": ((len(COUNT_NAMES),), i64, 0),
-        "sums": ((n_obs,), float, 0.0), "sumsq": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
+        "sums": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
         "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((n_ph, n_obs, width), i64, 0),
         "psums": ((n_ph, n_obs), float, 0.0), "pcount": ((n_ph,), i64, 0),
         "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),

@@ -115,16 +115,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     both kernels bin alike. Returns ``(AutomatonKernel, AutomatonChunks)``.
     """
     t0 = time.perf_counter()
-    automaton = lift_law_numbers(model.to_automaton())
-    energy = model.energy_expr
-    walls = [b for b in (model.barrier_exprs or ()) if b.is_finite is not False and b not in (sp.oo, -sp.oo)]
-    if walls:
-        g_bar = sp.Min(*[model.potential_expr.subs(_X, w) for w in walls])
-        below = sp.Piecewise((1, energy < g_bar), (0, True))
-    else:
-        below = sp.Integer(1)
-    observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
-    src, st = _auto_codegen.generate_source(automaton, "symplectic", observables, summed=_SUMMED)
+    automaton, observables, src, st = _generated(model)
     name = f"vibro_auto_symplectic_{_auto_codegen.source_hash(src)}"
     s = settings
     n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
@@ -138,7 +129,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     shapes = {
         "hist": ((n_obs, s["bins"] + 2), i64, 0), "jhist": ((ny, nx), i64, 0),
         "vhist": ((max(n_tr, 1), s["v_bins"] + 1), i64, 0), "counts": ((6,), i64, 0),
-        "sums": ((n_obs,), float, 0.0), "sumsq": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
+        "sums": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
         "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((1, n_obs, s["bins"] + 2), i64, 0),
         "psums": ((1, n_obs), float, 0.0), "pcount": ((1,), i64, 0),
         "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
@@ -165,6 +156,35 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     identity = {"kernel": hashlib.sha256(src.encode()).hexdigest()[:32], "law": [model.restitution.spec(), *law]}
     kern = AutomatonKernel(job, module, identity, time.perf_counter() - t0)
     return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
+
+
+_GENERATED: dict = {}
+
+
+def _generated(model):
+    """The lifted automaton, its observables, the kernel source and structure of ``model`` (memoised: the sympy
+    work costs 40-90 ms, as much as a short run)."""
+    law = sp.sympify(model.restitution.expression(sp.Abs(_Y)))
+    # srepr keeps every float in full precision (str and the fingerprint keep 15 digits)
+    declared = (model.g, model.h, tuple(model.f), sp.Matrix(model.intensity), model.epsilon, model.barrier_exprs)
+    key = (type(model).__name__, sp.srepr(declared), type(model.restitution).__name__, sp.srepr(law),
+           tuple(float.hex(float(a)) for a in sp.preorder_traversal(law) if isinstance(a, sp.Float)),
+           tuple((k, float.hex(float(v))) for k, v in model.params.items()))
+    if key not in _GENERATED:
+        automaton = lift_law_numbers(model.to_automaton())
+        energy = model.energy_expr
+        walls = [b for b in (model.barrier_exprs or ()) if b.is_finite is not False and b not in (sp.oo, -sp.oo)]
+        if walls:
+            g_bar = sp.Min(*[model.potential_expr.subs(_X, w) for w in walls])
+            below = sp.Piecewise((1, energy < g_bar), (0, True))
+        else:
+            below = sp.Integer(1)
+        observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
+        src, st = _auto_codegen.generate_source(automaton, "symplectic", observables, summed=_SUMMED)
+        if len(_GENERATED) > 256:
+            _GENERATED.clear()
+        _GENERATED[key] = (automaton, observables, src, st)
+    return _GENERATED[key]
 
 
 def lift_law_numbers(automaton):

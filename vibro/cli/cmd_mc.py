@@ -22,7 +22,7 @@ from vibro.cli.common import add_model_arguments, model_from_args
 from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
 from vibro.cli.mc_automaton import automaton_from_args
 from vibro.cli.mc_automaton import run as run_automaton
-from vibro.cli.names import SCHEMES
+from vibro.cli.names import AUTOMATON_ONLY_SCHEMES, SCHEMES
 
 
 def register(subparsers) -> None:
@@ -36,7 +36,9 @@ def register(subparsers) -> None:
                     "the first time a model and scheme are run.",
     )
     add_model_arguments(p)
-    p.add_argument("--scheme", default="milstein", choices=SCHEMES, help="time-stepping scheme")
+    p.add_argument("--scheme", default="milstein", choices=SCHEMES + AUTOMATON_ONLY_SCHEMES,
+                   help="time-stepping scheme (symplectic: automaton models; for an oscillator model milstein is "
+                        "that scheme)")
     p.add_argument("--dt", type=float, default=1e-3, help="time step; cost ∝ 1/dt")
     p.add_argument("--paths", type=int, default=256,
                    help="number of paths; cost ∝ paths x t_end / dt: the defaults are 5.6e8 path-steps, ~30 s on 2 "
@@ -100,6 +102,9 @@ def run(args) -> int:
     started = time.perf_counter()
     if getattr(model, "is_forced", False) or args.phases:
         return _run_forced(args, model, started)
+    if args.scheme in AUTOMATON_ONLY_SCHEMES:
+        raise ParameterError(f"--scheme {args.scheme} is a scheme of automaton models; for {model.name!r} "
+                             "--scheme milstein runs the same step (velocity first, then the exact free flight)")
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")

@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "automaton models",
         "--model also takes impact_pair, vibrating_table, or path/to/file.py:NAME where NAME is a HybridAutomaton, "
         "or a function or class returning one; --filter, --observable or --range also send an oscillator model "
-        "through the automaton engine (schemes em, milstein, splitting; --param sets automaton and filter "
+        "through the automaton engine (schemes em, milstein, splitting, symplectic; --param sets automaton and filter "
         "parameters).")
     g.add_argument("--filter", default=None, choices=FILTERS,
                    help="drive the model by coloured noise: ou (Ornstein-Uhlenbeck, --param alpha=BANDWIDTH) or "
@@ -221,13 +221,14 @@ def run(args, resolved) -> int:
                                  checkpoint=args.checkpoint, resume=args.resume,
                                  checkpoint_every=args.checkpoint_every)
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
-    if args.scheme != "splitting":
+    if args.scheme not in ("splitting", "symplectic"):
         try:
             from hybrid.stochastic import AUTOMATON_SCHEMES
 
             AUTOMATON_SCHEMES["splitting"].check(analyse(automaton))
             notes.append(f"scheme {args.scheme!r} is explicit in the drift and pumps energy into lightly damped "
-                         "oscillations (a bias ~ stiffness x dt / damping); this model admits --scheme splitting")
+                         "oscillations (a bias ~ stiffness x dt / damping); this model admits --scheme symplectic or "
+                         "splitting")
         except Exception:  # splitting does not apply: nothing better to suggest
             pass
     for text in dict.fromkeys(notes):

@@ -5,6 +5,8 @@
 
 SCHEMES = ("em", "milstein", "naive", "splitting")
 """Names of ``hybrid.stochastic.SCHEMES``."""
+AUTOMATON_ONLY_SCHEMES = ("symplectic",)
+"""Names of ``hybrid.stochastic.AUTOMATON_SCHEMES`` that the oscillator kernels do not have."""
 DENSITY_METHODS = ("chain", "exact-two-impact", "jump", "paper")
 """Names of ``averaging.METHODS``."""
 MODELS = ("duffing", "duffing-forced", "duffing-vdp", "rayleigh")
