@@ -364,7 +364,7 @@ class ImpactOscillator:
     def _G_numeric(self):
         G = self.potential_expr
         if G is not None:
-            fn = sp.lambdify(X, self.substitute(G), "numpy")
+            fn = sp.lambdify(X, self.substitute(G), ["scipy", "numpy"])  # erf, gamma, ... on arrays
             return lambda x: np.broadcast_to(np.asarray(fn(x), dtype=float), np.shape(x)) + 0.0
         g = self._g_numeric
 

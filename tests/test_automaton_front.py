@@ -32,7 +32,10 @@ TOTALS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out
     ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None), restitution=Newton(0.8)),
     ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
                      restitution=Ma(0.2)),
-], ids=["ma-symmetric", "newton-symmetric", "equilibrium-stop", "one-sided"])
+    # G(x) has erf in it (it used to fail on arrays before any kernel ran)
+    ImpactOscillator("x + exp(-x**2)*x**2", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 0.9},
+                     restitution=Newton(0.8)),
+], ids=["ma-symmetric", "newton-symmetric", "equilibrium-stop", "one-sided", "erf-potential"])
 def test_milstein_runs_on_the_automaton_kernel_with_the_oscillator_kernels_numbers(model):
     kw = dict(dt=2e-3, paths=16, t_end=200.0, t_burn=20.0, seed=3, chunk_paths=8, bins=80, v_bins=50)
     new = simulate_ensemble(model, "milstein", **kw)
@@ -56,6 +59,8 @@ def test_kernel_choice_is_checked_and_reported():
         simulate_ensemble(m, "milstein", kernel="fast", **kw)
     with pytest.raises(ParameterError, match="scheme 'splitting'"):
         simulate_ensemble(m, "splitting", kernel="automaton", **kw)
+    with pytest.raises(ParameterError, match="CPU kernel"):
+        simulate_ensemble(m, "milstein", kernel="automaton", scheduler="cuda", **kw)
     with pytest.warns(VibroWarning):  # two chunks only: the CI warning
         assert simulate_ensemble(m, "splitting", **kw).settings["kernel"] == "oscillator"
     from models import CustomRestitution

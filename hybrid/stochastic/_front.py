@@ -44,7 +44,8 @@ def reproduces(model, scheme) -> bool:
     >>> reproduces(DuffingImpact(), SCHEMES["milstein"]), reproduces(DuffingImpact(), SCHEMES["splitting"])
     (True, False)
     """
-    return scheme.name == "milstein" and getattr(model.restitution, "callable", None) is None
+    return (scheme.name == "milstein" and getattr(model.restitution, "callable", None) is None
+            and model.energy_expr is not None)
 
 
 class AutomatonKernel:

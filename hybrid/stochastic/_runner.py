@@ -706,6 +706,9 @@ def _choose_kernel(model, sch, kernel, gpu: bool) -> str:
     if kernel not in _front.KERNELS:
         raise ParameterError(f"kernel={kernel!r}; use one of {list(_front.KERNELS)}")
     if gpu:
+        if kernel == "automaton":
+            raise ParameterError("kernel='automaton' is a CPU kernel; scheduler='cuda' runs its own GPU kernel: "
+                                 "drop one of them")
         return "cuda"
     if kernel == "oscillator":
         return "oscillator"
