@@ -26,12 +26,15 @@ TOTALS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out
           "stuck", "nonfinite", "h_under", "v_under", "bad_e")
 
 
+SLOW = pytest.mark.slow  # about 12 s each (two cold kernel compiles); the default suite keeps three geometries
+
+
 @pytest.mark.parametrize("model", [
     DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0),
-    DuffingImpact(restitution=Newton(0.7), a=1.0, b=0.2, c=0.05, D=0.05, delta=0.8),
+    pytest.param(DuffingImpact(restitution=Newton(0.7), a=1.0, b=0.2, c=0.05, D=0.05, delta=0.8), marks=SLOW),
     ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None), restitution=Newton(0.8)),
-    ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
-                     restitution=Ma(0.2)),
+    pytest.param(ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
+                                  restitution=Ma(0.2)), marks=SLOW),
     # G(x) has erf in it (it used to fail on arrays before any kernel ran)
     ImpactOscillator("x + exp(-x**2)*x**2", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 0.9},
                      restitution=Newton(0.8)),

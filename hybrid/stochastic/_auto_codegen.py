@@ -286,11 +286,12 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
 
 
 def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
-                    cache: bool = True, summed=()) -> tuple[str, AutomatonStructure]:
+                    cache: bool = True, summed=(), phases: bool = False) -> tuple[str, AutomatonStructure]:
     """The numba module source of ``scheme`` for ``automaton`` and the structure it was derived from.
 
     ``observables`` maps names to sympy expressions of the states, parameters and ``t``; those named in
-    ``summed`` are only summed (means and the joint histogram), not histogrammed.
+    ``summed`` are only summed (means and the joint histogram), not histogrammed. Phase sections are compiled in
+    only with ``phases=True`` (they cost about 10 % of the compile time).
     """
     st = analyse(automaton, convention)
     names = _Names(st)
@@ -355,7 +356,9 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
         init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
         to_array_s=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
-        pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 20),
+        phase_block=ind(_PHASES.format(pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 8))
+                        if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
+                        " " * 12),
         load=ind("\n".join([f"_x{i} = _L{i}[_l]" for i in range(n)]
                             + ["mode = ML[_l]" if len(st.modes) > 1 else "mode = 0"]), " " * 16),
         draw=ind("\n".join(f"z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)\n_w{k} = sdt * z"
@@ -368,6 +371,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         observe=ind(names.scalar_block("ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")}),
                     " " * 16),
         fast_checks_set=fast_checks_set,
+        scheme_code={"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3}[scheme],
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
         n_modes=len(st.modes), n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
@@ -377,6 +381,15 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         velocities=tuple(velocity_of[q] for q in positions) + (0,),
     )
     return src, st
+
+
+# the phase sections of a step (out of line: inside the kernel's loop they slowed the time average by about 10 %)
+_PHASES = """\
+if phase_now:
+    for _l in range(nl):
+{pack}
+    record_phase(((step + 1) // phase_steps) % n_phase, XL, nl, _t1, p, x, ob, obs_lo, obs_scale, obs_bins,
+                 phist, psums, pcount)"""
 
 
 # one observable of a sample: sums in registers (written once per chunk), the histogram with under/overflow bins;
@@ -437,6 +450,7 @@ VEL = np.array({velocities}, dtype=np.int64)
 N_POS = {n_pos}
 LANES = 8
 FAST_CHECKS_SET = {fast_checks_set}
+SCHEME = {scheme_code}
 
 
 {funcs}
@@ -512,14 +526,14 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
     MAX_EVENTS of them (the excess is counted in counts[1]). The kernel comes here only for steps where a guard
     may fire (and for every step of the step rule's pilot, ``track``), so its cost does not matter.
     """
-    free_flight = scheme >= 2
+    free_flight = SCHEME >= 2  # a constant of the module: the other schemes' code is never compiled
     frac = 1.0  # share of the step still to run
-    if scheme == 2:
+    if SCHEME == 2:
         # kick: velocities by half the drift
         drift(mode, x, t, p, f)
         for k in range(N_POS):
             x[VEL[k]] += 0.5 * dt * f[VEL[k]]
-    elif scheme == 3:
+    elif SCHEME == 3:
         # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
         drift(mode, x, t, p, f)
         noise(mode, x, t, p, G)
@@ -557,7 +571,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
                 for k in range(M):
                     acc += G[i * M + k] * dw[k] * frac
                 xb[i] = xa[i] + acc
-            if scheme == 1:
+            if SCHEME == 1:
                 lgn(mode, xa, t, p, L)
                 for i in range(N):
                     acc = 0.0
@@ -619,7 +633,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
             if rec:
                 counts[1] += 1
             break
-    if scheme == 2:
+    if SCHEME == 2:
         # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
         noise(mode, x, t_end, p, G)
         for i in range(N):
@@ -770,11 +784,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {reload}
 {store}
             # statistics in loops of their own: the stepping loop above, and the time average's loop, stay short
-            if phase_now:
-                for _l in range(nl):
-{pack}
-                record_phase(((step + 1) // phase_steps) % n_phase, XL, nl, _t1, p, x, ob, obs_lo, obs_scale,
-                             obs_bins, phist, psums, pcount)
+{phase_block}
             if not sample:
                 continue
             for _l in range(nl):

@@ -541,7 +541,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     if mode0 not in mode_names:
         raise ParameterError(f"mode0={mode0!r} is not one of {mode_names}")
 
-    src, st = _auto_codegen.generate_source(automaton, scheme, obs, convention, summed=summed)
+    src, st = _auto_codegen.generate_source(automaton, scheme, obs, convention, summed=summed, phases=phases > 0)
     sch.check(st)
     name = f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}"
     ckdir = Path(checkpoint) if checkpoint is not None else None
