@@ -168,3 +168,30 @@ def test_strong_orders_fitted_on_a_two_degree_of_freedom_system(scheme, multipli
     declared = AUTOMATON_SCHEMES[scheme].orders(analyse(automaton))["strong"]
     assert declared == order
     assert slope == pytest.approx(order, abs=0.15), (errors, slope)
+
+
+@pytest.mark.parametrize("scheme", ["symplectic", "em", pytest.param("splitting", marks=SLOW),
+                                    pytest.param("milstein", marks=SLOW)])
+def test_zero_noise_impact_times_and_speeds_match_the_heyoka_orbit(scheme):
+    # the kernel's own event log (drive_automaton(events=K)): crossings located inside the step, D = 0
+    from hybrid.deterministic import simulate_orbit
+    from hybrid.stochastic import drive_automaton
+
+    automaton = DuffingImpact(restitution=Newton(0.9), a=1.0, b=0.2, c=0.02, D=0.0, delta=1.0).to_automaton()
+    orbit = simulate_orbit(automaton, x0=[0.0, 3.0], t_end=6.0, backend="heyoka")
+    times, speeds = orbit.impacts.t, np.abs(orbit.impacts.before[:, 1])
+    assert len(times) == 6
+    ratios = []
+    for dt in (2e-3, 1e-3, 5e-4, 2.5e-4):
+        n = int(round(6.0 / dt))
+        _, log, count = drive_automaton(automaton, scheme, dt, np.zeros((1, n, 1)), x0=(0.0, 3.0), events=10)
+        assert count[0] == 6
+        assert [automaton.transitions[int(j)].name for j in log[0, :6, 1]] == list(orbit.impacts.transition)
+        err_t = np.max(np.abs(log[0, :6, 0] - times))
+        err_v = np.max(np.abs(log[0, :6, 2] - speeds))
+        # first order: measured err_t / dt 1.6-3.5 (splitting, symplectic: the kicks make the constant vary with
+        # where in the step the wall is met) and 8.3 (em, steady); speeds 1.2-2.0 and 6.4
+        assert err_t < 10 * dt and err_v < 10 * dt, (dt, err_t / dt, err_v / dt)
+        ratios.append(err_t / dt)
+    if scheme == "em":  # a clean first-order constant: the fitted slope is 1
+        assert max(ratios) / min(ratios) < 1.02, ratios

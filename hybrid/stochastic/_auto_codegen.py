@@ -519,7 +519,7 @@ def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
 
 @nb.njit(nogil=True, cache=CACHE)
 def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins, counts, gstat, track,
-               vsum, fbad, xa, va, xb, xs, xr, f, G, L):
+               vsum, fbad, xa, va, xb, xs, xr, f, G, L, elog, nlog):
     """One whole step of the path ``x`` in ``mode`` through the general event loop; returns the mode after it.
 
     Every crossing inside the step is located on the step's interpolant and reset there, in time order, at most
@@ -613,6 +613,11 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
             if counts[5] == 0:
                 fbad[0] = speed
             counts[5] += 1
+        if nlog[0] < elog.shape[0]:  # the event log of driven paths (empty in ensembles)
+            elog[nlog[0], 0] = t + best_s * tau
+            elog[nlog[0], 1] = best
+            elog[nlog[0], 2] = speed
+        nlog[0] += 1
         if rec:
             events[best] += 1
             vsum[best] += speed
@@ -648,10 +653,11 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
 
 
 @nb.njit(cache=CACHE)
-def drive(x0, mode0, dws, dt, t0, p, scheme, out):
+def drive(x0, mode0, dws, dt, t0, p, scheme, out, elog, nlog):
     """Final states ``out`` (paths, N) of paths driven by given Brownian increments ``dws`` (paths, steps, M),
     every step through ``event_step`` (for convergence tests: sums of fine increments drive a coarse grid along
-    the same Brownian path); returns the events handled."""
+    the same Brownian path). ``elog[path]`` receives (time, transition, speed) of the path's first events and
+    ``nlog[path]`` the number of its events; returns the events handled."""
     n_paths = dws.shape[0]
     n_steps = dws.shape[1]
     x = np.empty(N)
@@ -678,7 +684,8 @@ def drive(x0, mode0, dws, dt, t0, p, scheme, out):
             for j in range(M):
                 dw[j] = dws[ip, k, j]
             mode = event_step(mode, x, t0 + k * dt, t0 + (k + 1) * dt, dt, dw, p, scheme, True, events, vhist, 0.0,
-                              0, counts, gstat, False, vsum, fbad, xa, va, xb, xs, xr, f, G, L)
+                              0, counts, gstat, False, vsum, fbad, xa, va, xb, xs, xr, f, G, L, elog[ip],
+                              nlog[ip:ip + 1])
         for i in range(N):
             out[ip, i] = x[i]
     return events[:N_TRANS].sum()
@@ -748,6 +755,8 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     XL = np.empty((LANES, N))
     ML = np.empty(LANES, dtype=np.int64)
     SL = np.zeros(LANES, dtype=np.bool_)
+    elog = np.empty((0, 3))  # ensembles keep no event log
+    nlog = np.zeros(1, dtype=np.int64)
     _nsamp = 0
 {alloc}
 {unpack}
@@ -778,7 +787,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {to_array_s}
 {store_dw}
                     mode = event_step(mode, x, t, _t1, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins,
-                                      counts, gstat, track, vsum, fbad, xa, va, xb, xs, xr, f, G, L)
+                                      counts, gstat, track, vsum, fbad, xa, va, xb, xs, xr, f, G, L, elog, nlog)
                     ML[_l] = mode
                     SL[_l] = True  # until the next sample: its admissible-set check is not settled
 {reload}

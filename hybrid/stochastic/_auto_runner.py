@@ -300,11 +300,13 @@ class AutomatonEnsemble:
 
 
 def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params: dict | None = None,
-                    mode0: str | None = None, convention: str = "stratonovich") -> np.ndarray:
+                    mode0: str | None = None, convention: str = "stratonovich", events: int = 0):
     """Final states (paths, n) of paths driven by given Brownian increments ``increments`` (paths, steps, m).
 
     For convergence tests: summing fine increments in blocks gives the same Brownian path on a coarser grid. Every
-    step goes through the kernel's general event loop; no statistics, no step rule.
+    step goes through the kernel's general event loop; no statistics, no step rule. With ``events=K`` it returns
+    ``(states, log, counts)`` instead: ``log[path, i]`` = (time, transition index, |d guard / dt|) of the path's
+    first K events (NaN beyond ``counts[path]``), located inside the steps as in the ensembles.
 
     Examples
     --------
@@ -333,9 +335,13 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     mode0 = automaton.initial_mode if mode0 is None else mode0
     module, _ = load_source(f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}", src)
     out = np.empty((dws.shape[0], n))
+    if isinstance(events, bool) or not isinstance(events, (int, np.integer)) or not 0 <= events <= 10**6:
+        raise ParameterError(f"events={events!r} must be an integer in [0, 1e6]")
+    elog = np.full((dws.shape[0], int(events), 3), np.nan)
+    nlog = np.zeros(dws.shape[0], dtype=np.int64)
     module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
-                 sch.code, out)
-    return out
+                 sch.code, out, elog, nlog)
+    return (out, elog, nlog) if events else out
 
 
 def _as_float(name, value, positive=True):
