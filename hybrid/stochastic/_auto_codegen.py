@@ -449,6 +449,16 @@ POS = np.array({positions}, dtype=np.int64)
 VEL = np.array({velocities}, dtype=np.int64)
 N_POS = {n_pos}
 LANES = 8
+WORK = 6 * N + N * M + N * M * M
+# event_step's outputs packed in two arrays (every array argument of a call in the hot loop costs registers):
+# iw = [counts 0..5, events per transition, the event-log count], fw = [speed sums per transition, first failed
+# check's speed, guard statistics (4 per transition)]
+IW_EVENTS = 6
+IW_NLOG = 6 + N_TRANS
+IW = 7 + N_TRANS
+FW_FBAD = N_TRANS
+FW_GSTAT = N_TRANS + 1
+FW = N_TRANS + 1 + 4 * N_TRANS
 FAST_CHECKS_SET = {fast_checks_set}
 SCHEME = {scheme_code}
 
@@ -518,14 +528,21 @@ def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
 
 
 @nb.njit(nogil=True, cache=CACHE)
-def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins, counts, gstat, track,
-               vsum, fbad, xa, va, xb, xs, xr, f, G, L, elog, nlog):
+def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws, elog):
     """One whole step of the path ``x`` in ``mode`` through the general event loop; returns the mode after it.
 
     Every crossing inside the step is located on the step's interpolant and reset there, in time order, at most
-    MAX_EVENTS of them (the excess is counted in counts[1]). The kernel comes here only for steps where a guard
+    MAX_EVENTS of them (the excess is counted in iw[1]). The kernel comes here only for steps where a guard
     may fire (and for every step of the step rule's pilot, ``track``), so its cost does not matter.
     """
+    xa = ws[0:N]
+    va = ws[N:2 * N]
+    xb = ws[2 * N:3 * N]
+    xs = ws[3 * N:4 * N]
+    xr = ws[4 * N:5 * N]
+    f = ws[5 * N:6 * N]
+    G = ws[6 * N:6 * N + N * M]
+    L = ws[6 * N + N * M:WORK]
     free_flight = SCHEME >= 2  # a constant of the module: the other schemes' code is never compiled
     frac = 1.0  # share of the step still to run
     if SCHEME == 2:
@@ -591,12 +608,13 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
             g1 = guard(j, xb, t + tau, p)
             if track:
                 dg = g1 - g0
-                gstat[j, 0] += dg * dg
-                gstat[j, 1] += 1.0
-                if g0 < gstat[j, 2]:
-                    gstat[j, 2] = g0
-                if g0 > gstat[j, 3]:
-                    gstat[j, 3] = g0
+                gs = FW_GSTAT + 4 * j
+                fw[gs] += dg * dg
+                fw[gs + 1] += 1.0
+                if g0 < fw[gs + 2]:
+                    fw[gs + 2] = g0
+                if g0 > fw[gs + 3]:
+                    fw[gs + 3] = g0
             if crosses(DIRECTION[j], g0, g1):
                 sj = locate(j, xa, va, xb, t, tau, p, free_flight, g0, g1, xs)
                 if sj < best_s:
@@ -610,17 +628,18 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
         speed = abs(grate(best, xs, t + best_s * tau, p))
         if not check(best, xs, t + best_s * tau, p):
             # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
-            if counts[5] == 0:
-                fbad[0] = speed
-            counts[5] += 1
-        if nlog[0] < elog.shape[0]:  # the event log of driven paths (empty in ensembles)
-            elog[nlog[0], 0] = t + best_s * tau
-            elog[nlog[0], 1] = best
-            elog[nlog[0], 2] = speed
-        nlog[0] += 1
+            if iw[5] == 0:
+                fw[FW_FBAD] = speed
+            iw[5] += 1
+        k_log = iw[IW_NLOG]
+        if k_log < elog.shape[0]:  # the event log of driven paths (empty in ensembles)
+            elog[k_log, 0] = t + best_s * tau
+            elog[k_log, 1] = best
+            elog[k_log, 2] = speed
+        iw[IW_NLOG] += 1
         if rec:
-            events[best] += 1
-            vsum[best] += speed
+            iw[IW_EVENTS + best] += 1
+            fw[best] += speed
             vb = speed * v_scale
             if vb < v_bins:
                 vhist[best, int(vb)] += 1
@@ -636,7 +655,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, scheme, rec, events, vhist, v_scale
         if n_ev >= MAX_EVENTS:
             # chattering or Zeno inside one step: stop resolving it, keep the state, count it
             if rec:
-                counts[1] += 1
+                iw[1] += 1
             break
     if SCHEME == 2:
         # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
@@ -661,34 +680,27 @@ def drive(x0, mode0, dws, dt, t0, p, scheme, out, elog, nlog):
     n_paths = dws.shape[0]
     n_steps = dws.shape[1]
     x = np.empty(N)
-    xa = np.empty(N)
-    va = np.empty(N)
-    xb = np.empty(N)
-    xs = np.empty(N)
-    xr = np.empty(N)
-    f = np.empty(N)
-    G = np.empty(N * M)
-    L = np.empty(N * M * M)
+    ws = np.empty(WORK)  # event_step's work arrays in one (each array argument costs registers at the call)
     dw = np.empty(M)
-    counts = np.zeros(6, dtype=np.int64)
-    events = np.zeros(N_TRANS + 1, dtype=np.int64)
     vhist = np.zeros((N_TRANS + 1, 1), dtype=np.int64)
-    gstat = np.zeros((N_TRANS + 1, 4))
-    vsum = np.zeros(N_TRANS + 1)
-    fbad = np.zeros(1)
+    iw = np.zeros(IW, dtype=np.int64)
+    fw = np.zeros(FW)
+    total = 0
     for ip in range(n_paths):
         for i in range(N):
             x[i] = x0[i]
         mode = mode0
+        iw[IW_NLOG] = 0
         for k in range(n_steps):
             for j in range(M):
                 dw[j] = dws[ip, k, j]
-            mode = event_step(mode, x, t0 + k * dt, t0 + (k + 1) * dt, dt, dw, p, scheme, True, events, vhist, 0.0,
-                              0, counts, gstat, False, vsum, fbad, xa, va, xb, xs, xr, f, G, L, elog[ip],
-                              nlog[ip:ip + 1])
+            mode = event_step(mode, x, t0 + k * dt, t0 + (k + 1) * dt, dt, dw, p, True, vhist, 0.0, 0, False, iw, fw,
+                              ws, elog[ip])
+        nlog[ip] = iw[IW_NLOG]
+        total += iw[IW_NLOG]
         for i in range(N):
             out[ip, i] = x[i]
-    return events[:N_TRANS].sum()
+    return total
 
 
 @nb.njit(nogil=True, cache=CACHE)
@@ -742,21 +754,18 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
     sdt = math.sqrt(dt)
     x = np.empty(N)
-    xa = np.empty(N)
-    va = np.empty(N)
-    xb = np.empty(N)
-    xs = np.empty(N)
-    xr = np.empty(N)
-    f = np.empty(N)
-    G = np.empty(N * M)
-    L = np.empty(N * M * M)
+    ws = np.empty(WORK)  # event_step's work arrays in one (each array argument costs registers at the call)
     dw = np.empty(M)
     ob = np.empty(N_OBS)
     XL = np.empty((LANES, N))
     ML = np.empty(LANES, dtype=np.int64)
     SL = np.zeros(LANES, dtype=np.bool_)
     elog = np.empty((0, 3))  # ensembles keep no event log
-    nlog = np.zeros(1, dtype=np.int64)
+    iw = np.zeros(IW, dtype=np.int64)
+    fw = np.zeros(FW)
+    for j in range(N_TRANS):
+        fw[FW_GSTAT + 4 * j + 2] = np.inf
+        fw[FW_GSTAT + 4 * j + 3] = -np.inf
     _nsamp = 0
 {alloc}
 {unpack}
@@ -786,8 +795,8 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                 if _slow:
 {to_array_s}
 {store_dw}
-                    mode = event_step(mode, x, t, _t1, dt, dw, p, scheme, rec, events, vhist, v_scale, v_bins,
-                                      counts, gstat, track, vsum, fbad, xa, va, xb, xs, xr, f, G, L, elog, nlog)
+                    mode = event_step(mode, x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
+                                      elog)
                     ML[_l] = mode
                     SL[_l] = True  # until the next sample: its admissible-set check is not settled
 {reload}
@@ -822,6 +831,19 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                     else:
                         counts[4] += 1
     counts[0] += _nsamp
+    # event_step's packed outputs into the chunk's arrays
+    counts[1] += iw[1]
+    if iw[5] and counts[5] == 0:
+        fbad[0] = fw[FW_FBAD]
+    counts[5] += iw[5]
+    for j in range(N_TRANS):
+        events[j] += iw[IW_EVENTS + j]
+        vsum[j] += fw[j]
+        gs = FW_GSTAT + 4 * j
+        gstat[j, 0] += fw[gs]
+        gstat[j, 1] += fw[gs + 1]
+        gstat[j, 2] = min(gstat[j, 2], fw[gs + 2])
+        gstat[j, 3] = max(gstat[j, 3], fw[gs + 3])
 {flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
 '''
