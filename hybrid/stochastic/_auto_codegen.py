@@ -1,25 +1,27 @@
 """Numba source for Monte Carlo of any :class:`~hybrid.automaton.HybridAutomaton` with noise.
 
-The automaton's sympy expressions (Itô drift, noise matrix, guards, resets, observables, the guards' rates of
-change along the drift) become small ``inline`` numba functions of ``(x, t, p)``; one generic kernel calls them
-through if-chains on the mode index. Parameter values are not in the source (they arrive as the array ``p``), so
-changing a parameter never recompiles. The source is cached on disk by its hash, like the oscillator kernels.
+The automaton's sympy expressions (Itô drift, noise matrix, guards, resets, checks, observables, the guards' rates
+of change along the drift) become numba functions of ``(which, x, t, p)``, one per kind with a branch per mode or
+transition. Parameter values are not in the source (they arrive as the array ``p``), so changing a parameter never
+recompiles. The scheme is a constant of the generated module, so only its own code is compiled. The source is
+cached on disk by its hash, like the oscillator kernels.
 
 Time ``t`` may appear in flows, noise, guards and resets (forcing, moving barriers).
 
 Crossings are located on the step's own interpolant: for ``em`` and ``milstein`` the straight segment from the
-state before to the state after the step; for ``splitting`` the free flight of the positions at constant velocity,
-which *is* the scheme's position update, so the location is exact for guards of the positions. A root is
-bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative tolerance of
-1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at most
-``MAX_EVENTS`` of them; the excess is counted and reported.
+state before to the state after the step; for ``splitting`` and ``symplectic`` the free flight of the positions at
+constant velocity, which *is* the scheme's position update, so the location is exact for guards of the positions.
+A root is bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative
+tolerance of 1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at
+most ``MAX_EVENTS`` of them; the excess is counted and reported.
 
 Speed: paths run in 8 interleaved lanes, and each step runs first as generated straight-line code on scalars (the
 mode's drift, only the nonzero noise entries, the guards at the end of the flight). Only a step at whose end a
 guard may have fired (a direction +1 guard not below 0, or any sign change of a direction 0 guard) goes through the
-general event loop ``event_step``. On Example 1 this brought the kernel from 0.47 to about 0.9 of the oscillator
-kernel's throughput with splitting, and from 0.25 to 0.7-0.8 with Milstein (``benchmarks/mc_throughput.py``,
-section 4).
+general event loop ``event_step``. On Example 1 (``benchmarks/mc_throughput.py``, section 4) this brought the
+kernel from 0.47 to 1.03 of the oscillator kernel's throughput with splitting and from 0.25 to 0.81 with the
+explicit milstein; the oscillator front end (``symplectic``, five summed observables) runs at 0.74-0.85 of the
+oscillator kernel it replaces, depending on the build.
 """
 
 from __future__ import annotations
