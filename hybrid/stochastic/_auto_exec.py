@@ -18,7 +18,7 @@ import numpy as np
 from hybrid.errors import CheckpointError, ParameterError
 from hybrid.io import atomic_write
 
-from . import _codegen, _rng
+from . import _codegen, _rng, _shared_exec
 
 CHECKPOINT_FILE = "automaton_checkpoint.npz"
 CHECKPOINT_FORMAT = 2
@@ -77,31 +77,16 @@ def identity(settings: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _checksum(arrays: dict) -> str:
-    h = hashlib.sha256()
-    for key in sorted(arrays):
-        a = np.ascontiguousarray(arrays[key])
-        h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
 def check_directory(directory: Path, resume: bool) -> None:
     """Before any work: a directory that can be written, and no checkpoint to overwrite unless resuming."""
-    if directory.exists() and not directory.is_dir():
-        raise CheckpointError(f"checkpoint {str(directory)!r} is a file, not a directory; give a directory")
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CheckpointError(f"cannot create the checkpoint directory {str(directory)!r} ({exc.strerror or exc})") \
-            from None
+    _shared_exec.prepare_directory(directory)
     if not resume and (directory / CHECKPOINT_FILE).exists():
         raise ParameterError(f"{directory / CHECKPOINT_FILE} exists; pass resume=True or another directory")
 
 
 def write(directory: Path, run_id: str, done: np.ndarray, rows: dict) -> None:
     arrays = {**rows, "done": done, "format": np.array(CHECKPOINT_FORMAT), "identity": np.array(run_id)}
-    arrays["checksum"] = np.array(_checksum(arrays))
+    arrays["checksum"] = np.array(_shared_exec.checksum(arrays))
     atomic_write(directory / CHECKPOINT_FILE, lambda tmp: np.savez(tmp, **arrays))
 
 
@@ -111,17 +96,7 @@ def load(directory: Path, run_id: str, rows: dict) -> np.ndarray | None:
     if not path.exists():
         return None
     hint = "delete it or use another checkpoint directory"
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            arrays = {k: d[k] for k in d.files}
-    except Exception as exc:  # truncated or not a zip: numpy raises many types
-        raise CheckpointError(f"checkpoint {path} cannot be read ({type(exc).__name__}): it is corrupt; {hint}") \
-            from None
-    stored = str(arrays.pop("checksum", ""))
-    if "format" not in arrays or int(arrays["format"]) != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"checkpoint {path} has an unknown format (need {CHECKPOINT_FORMAT}); {hint}")
-    if stored != _checksum(arrays):
-        raise CheckpointError(f"checkpoint {path} fails its checksum (edited or corrupt); {hint}")
+    arrays = _shared_exec.read_checked(path, CHECKPOINT_FORMAT, hint)
     if str(arrays["identity"]) != run_id:
         raise CheckpointError(f"checkpoint {path} was made by another run (automaton, parameters or settings "
                               "differ); resume with the same arguments or use another directory")
@@ -148,30 +123,10 @@ def execute(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, thr
         finally:  # on Ctrl-C do not wait for the queued chunks (the checkpoint keeps what is done)
             pool.shutdown(wait=False, cancel_futures=True)
         return
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:  # pragma: no cover
-        raise ParameterError("scheduler='dask' needs dask.distributed: pip install 'dask[distributed]'") from exc
-    own = []
-    if isinstance(scheduler, str):
-        name, _, address = scheduler.partition("=")
-        if name != "dask":
-            raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
-        if address:
-            client = Client(address)
-        else:
-            cluster = LocalCluster(n_workers=min(2, os.cpu_count() or 1), threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            own.append(cluster)
-            client = Client(cluster)
-        own.insert(0, client)
-    else:
-        client = scheduler
-    try:
+    with _shared_exec.dask_client(scheduler) as client:
+        from distributed import as_completed  # present: the client was made
+
         futures = [client.submit(_remote, job, k, states[k].copy(), pure=False, retries=3,
                                  key=f"vibro-auto-{job.name}-{k}-{os.getpid()}-{time.time_ns()}") for k in pending]
         for fut in as_completed(futures):
             accept(*fut.result())
-    finally:
-        for obj in own:
-            obj.close()

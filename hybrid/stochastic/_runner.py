@@ -9,7 +9,6 @@ and across a checkpoint and resume.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -34,7 +33,7 @@ from hybrid.errors import (
 )
 from hybrid.io import atomic_write
 
-from . import _codegen, _front, _rng
+from . import _codegen, _front, _rng, _shared_exec
 from ._problem import MAX_MEMORY, MAX_PATH_STEPS, EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
@@ -418,21 +417,11 @@ def _remote_run(job: _Job, ids, states):
 
 
 # ---------------------------------------------------------------------------------------------------- checkpoints
-def _checksum(arrays: dict) -> str:
-    """SHA-256 over every array's name, dtype, shape and bytes: an edited checkpoint (doubled counts) is refused."""
-    h = hashlib.sha256()
-    for key in sorted(arrays):
-        a = np.ascontiguousarray(arrays[key])
-        h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
 def _write_checkpoint(directory: Path, stats: EnsembleStatistics) -> None:
     directory.mkdir(parents=True, exist_ok=True)
     arrays = stats.to_arrays()
     arrays["format"] = np.array(CHECKPOINT_FORMAT)
-    arrays["checksum"] = np.array(_checksum(arrays))
+    arrays["checksum"] = np.array(_shared_exec.checksum(arrays))
     # the shared writer: a unique temporary name (ends in .npz, so savez adds nothing), removed on failure
     atomic_write(directory / CHECKPOINT_FILE, lambda tmp: np.savez(tmp, **arrays))
 
@@ -442,33 +431,12 @@ _RESUME_KEYS = ("scheme", "dt", "paths", "t_end", "t_burn", "seed", "h_max", "bi
 _IDENTITY_NAMES = {"kernel": "generated kernel", "law": "restitution law", "params": "model parameters"}
 
 
-def _check_checkpoint_dir(directory: Path) -> None:
-    """Before any work: the checkpoint path must be a directory that can be created and written."""
-    if directory.exists() and not directory.is_dir():
-        raise CheckpointError(f"checkpoint {str(directory)!r} is a file, not a directory; give a directory")
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CheckpointError(f"cannot create the checkpoint directory {str(directory)!r} ({exc.strerror or exc})") \
-            from None
-
-
 def _load_checkpoint(directory: Path, settings: dict) -> EnsembleStatistics | None:
     path = directory / CHECKPOINT_FILE
     if not path.exists():
         return None
     hint = "delete it or use another --checkpoint directory"
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            arrays = {k: d[k] for k in d.files}
-    except Exception as exc:  # not a zip, truncated, bad member: numpy raises many types
-        raise CheckpointError(f"checkpoint {path} cannot be read ({type(exc).__name__}): it is corrupt; {hint}") \
-            from None
-    stored = str(arrays.pop("checksum", ""))
-    if "format" not in arrays or int(arrays["format"]) != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"checkpoint {path} has an old or unknown format (need {CHECKPOINT_FORMAT}); {hint}")
-    if stored != _checksum(arrays):
-        raise CheckpointError(f"checkpoint {path} fails its checksum (edited or corrupt); {hint}")
+    arrays = _shared_exec.read_checked(path, CHECKPOINT_FORMAT, hint)
     try:
         stats = EnsembleStatistics.from_arrays(arrays)
     except Exception as exc:
@@ -728,7 +696,7 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
     local = ex.scheduler in (None, "threads", "local")
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if ckdir is not None:
-        _check_checkpoint_dir(ckdir)
+        _shared_exec.prepare_directory(ckdir)
         if not resume and (ckdir / CHECKPOINT_FILE).exists():
             raise ParameterError(f"{ckdir / CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
     law_fn = getattr(model.restitution, "callable", None)
@@ -870,35 +838,15 @@ def _run_chunks(job, kern, pending, states, local, scheduler, accept, flush, ckd
 
 
 def _run_dask(job, pending, states, scheduler, accept) -> None:
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:  # pragma: no cover
-        raise ParameterError("scheduler='dask' needs dask.distributed: pip install 'dask[distributed]'") from exc
-    own = []
-    if isinstance(scheduler, str):
-        name, _, address = scheduler.partition("=")
-        if name != "dask":
-            raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask or dask=ADDRESS")
-        if address:
-            client = Client(address)
-        else:
-            cluster = LocalCluster(n_workers=min(2, os.cpu_count() or 1), threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            own.append(cluster)
-            client = Client(cluster)
-        own.insert(0, client)
-    else:
-        client = scheduler
-    try:
+    with _shared_exec.dask_client(scheduler) as client:
+        from distributed import as_completed  # present: the client was made
+
         # the job travels inside each task (a few kB): scattered data would be lost with a killed worker
         futures = [client.submit(_remote_run, job, np.array([k]), states[[k]], pure=False, retries=3,
                                  key=f"vibro-mc-{job.name}-{job.seed}-{k}-{os.getpid()}-{time.time_ns()}")
                    for k in pending]
         for fut in as_completed(futures):
             accept(fut.result())
-    finally:
-        for obj in own:
-            obj.close()
 
 
 def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
