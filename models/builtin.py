@@ -8,6 +8,19 @@ from .oscillator import ImpactOscillator
 from .restitution import Ma, RestitutionLaw
 
 
+def _parameters(model: str, defaults: dict, given: dict) -> dict:
+    """The defaults overridden by ``given``; an unknown name is refused in one line."""
+    unknown = set(given) - set(defaults)
+    if unknown:
+        from hybrid.errors import ParameterError
+
+        raise ParameterError(f"unknown parameters {sorted(unknown)} for {model}; known: {sorted(defaults)}")
+    return {**defaults, **given}
+
+
+_DUFFING = {"a": 1.0, "b": 0.2, "c": 0.025, "D": 0.05, "delta": 1.0}
+
+
 class DuffingImpact(ImpactOscillator):
     """Example 1 (eq. 32): x'' + c x' + a x + b x**3 = xi(t), |x| < delta, Ma restitution law.
 
@@ -25,18 +38,13 @@ class DuffingImpact(ImpactOscillator):
     name = "duffing"
 
     def __init__(self, restitution: RestitutionLaw | None = None, **params: float):
-        defaults = {"a": 1.0, "b": 0.2, "c": 0.025, "D": 0.05, "delta": 1.0}
-        unknown = set(params) - set(defaults)
-        if unknown:
-            from hybrid.errors import ParameterError
-
-            raise ParameterError(f"unknown parameters {sorted(unknown)} for duffing; known: {sorted(defaults)}")
+        parameters = _parameters("duffing", _DUFFING, params)
         super().__init__(
             restoring="a*x + b*x**3",
             damping="c*y",
             noise=(1,),
             intensity="D",
-            parameters={**defaults, **params},
+            parameters=parameters,
             restitution=restitution if restitution is not None else Ma(vc=0.4),
         )
 
@@ -73,17 +81,13 @@ class DuffingVanDerPolImpact(ImpactOscillator):
             raise ModelError(f"reading must be one of {sorted(self.READINGS)}, got {reading!r}")
         self.reading = reading
         defaults = {"a": 1.0, "b": 0.2, "c1": -0.01, "c2": 0.005, "D": 0.01, "delta": 1.0}
-        unknown = set(params) - set(defaults)
-        if unknown:
-            from hybrid.errors import ParameterError
-
-            raise ParameterError(f"unknown parameters {sorted(unknown)} for duffing-vdp; known: {sorted(defaults)}")
+        parameters = _parameters("duffing-vdp", defaults, params)
         super().__init__(
             restoring="a*x + b*x**3",
             damping=self.READINGS[reading],
             noise=(1,),
             intensity="D",
-            parameters={**defaults, **params},
+            parameters=parameters,
             restitution=restitution if restitution is not None else Ma(vc=0.4),
         )
 
@@ -131,18 +135,13 @@ class ForcedDuffingImpact(ImpactOscillator):
     name = "duffing-forced"
 
     def __init__(self, restitution: RestitutionLaw | None = None, **params: float):
-        defaults = {"a": 1.0, "b": 0.2, "c": 0.025, "D": 0.05, "delta": 1.0, "A": 0.2, "Omega": 1.2, "phi": 0.0}
-        unknown = set(params) - set(defaults)
-        if unknown:
-            from hybrid.errors import ParameterError
-
-            raise ParameterError(f"unknown parameters {sorted(unknown)} for duffing-forced; known: {sorted(defaults)}")
+        parameters = _parameters("duffing-forced", {**_DUFFING, "A": 0.2, "Omega": 1.2, "phi": 0.0}, params)
         super().__init__(
             restoring="a*x + b*x**3",
             damping="c*y",
             noise=(1,),
             intensity="D",
-            parameters={**defaults, **params},
+            parameters=parameters,
             restitution=restitution if restitution is not None else Ma(vc=0.4),
             forcing="A*cos(Omega*t + phi)",
         )
