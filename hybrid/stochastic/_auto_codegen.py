@@ -38,6 +38,9 @@ from hybrid.errors import ModelError
 from ._codegen import _Printer
 
 TEMPLATE_VERSION = "5"
+SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3}
+"""The generated module's ``SCHEME``: Euler-Maruyama, Milstein (commutative noise), splitting (kick, free flight,
+noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight)."""
 MAX_EVENTS = 64
 """Events handled within one time step; more are counted as ``event_overflow`` (chattering or Zeno)."""
 TIME = real_symbol("t")
@@ -191,6 +194,11 @@ class _Names:
         return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(lines), "    ") + "\n"
 
 
+def _lg(G, xs, i: int, j: int, k: int):
+    """L^j G_ik = sum_l G_lj dG_ik/dx_l, the Milstein coefficient of w_j w_k in the increment of state i."""
+    return sum(G[l, j] * sp.diff(G[i, k], xs[l]) for l in range(len(xs)))
+
+
 def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> str:
     """Straight-line code of one step in mode ``k`` on the scalars ``_x0, _x1, ...`` when no guard may fire.
 
@@ -207,78 +215,60 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
     ys = [sp.Symbol(f"_y{i}") for i in range(n)]
     f, G = st.drift[k], st.noise[k]
     pre = f"_f{k}_"
-    lines = []
 
-    def block(targets, exprs, tag, extra=None):
+    def block(out, targets, exprs, tag, extra=None):
+        """Append to ``out`` the assignments ``targets = exprs`` (common sub-expressions once)."""
         exprs = [sp.sympify(e).xreplace(names.subs) for e in exprs]
         if extra:
             exprs = [e.xreplace(extra) for e in exprs]
         reps, red = sp.cse(exprs, symbols=sp.numbered_symbols(pre + tag))
-        lines.extend(f"{s_} = {names.printer.doprint(e)}" for s_, e in reps)
-        lines.extend(f"{tg} = {names.printer.doprint(e)}" for tg, e in zip(targets, red))
+        out.extend(f"{s_} = {names.printer.doprint(e)}" for s_, e in reps)
+        out.extend(f"{tg} = {names.printer.doprint(e)}" for tg, e in zip(targets, red))
 
-    code_t1 = {sp.Symbol("t"): t1}
-    to_y = {sp.Symbol(f"_x{i}"): ys[i] for i in range(n)}
-    if scheme in ("em", "milstein"):
-        inc = []
-        for i in range(n):
-            e = f[i] * dt + sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0)
-            if scheme == "milstein":
-                for j in range(m):
-                    for kk in range(m):
-                        lg = sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
-                        if lg != 0:
-                            e += sp.Rational(1, 2) * lg * (w[j] * w[kk] - (dt if j == kk else 0))
-            inc.append(e)
-        block([f"_y{i}" for i in range(n)], [xs[i] + inc[i] for i in range(n)], "a")
-    elif scheme == "symplectic":  # velocities by a Milstein step, then the positions' free flight at the new ones
-        vel = sorted({v for _, v in st.pairs})
-        inc = {}
-        for i in vel:
-            e = f[i] * dt + sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0)
+    def increment(i, milstein):
+        """The Ito increment of state i over the step: drift, noise and, for Milstein, 1/2 L^j G_ik (w_j w_k - dt)."""
+        e = f[i] * dt + sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0)
+        if milstein:
             for j in range(m):
                 for kk in range(m):
-                    lg = sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
+                    lg = _lg(G, xs, i, j, kk)
                     if lg != 0:
                         e += sp.Rational(1, 2) * lg * (w[j] * w[kk] - (dt if j == kk else 0))
-            inc[i] = e
-        block([f"_y{i}" for i in vel], [xs[i] + inc[i] for i in vel], "a")
-        for q, v in st.pairs:
-            lines.append(f"_y{q} = _x{q} + dt * _y{v}")
-    else:  # splitting: kick, free flight (positions only; velocities are the kicked ones)
-        vel = sorted({v for _, v in st.pairs})
-        block([f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
-        velocity_of = dict(st.pairs)
-        for q in velocity_of:
-            lines.append(f"_y{q} = _x{q} + dt * _y{velocity_of[q]}")
+        return e
+
+    lines, commit = [], [f"_x{i} = _y{i}" for i in range(n)]
+    code_t1 = {sp.Symbol("t"): t1}
+    to_y = {sp.Symbol(f"_x{i}"): ys[i] for i in range(n)}
+    vel = sorted({v for _, v in st.pairs})
+    if scheme in ("em", "milstein"):
+        block(lines, [f"_y{i}" for i in range(n)], [xs[i] + increment(i, scheme == "milstein") for i in range(n)],
+              "a")
+    else:
+        if scheme == "symplectic":  # velocities by a Milstein step, then the positions' flight at the new ones
+            block(lines, [f"_y{i}" for i in vel], [xs[i] + increment(i, True) for i in vel], "a")
+        else:  # splitting: kick, free flight (positions only, at the kicked velocities), noise, kick
+            block(lines, [f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
+            # the noise and the closing kick at the end of the step, after the commit (as in the event loop)
+            noisy = [i for i in range(n) if any(G[i, j] != 0 for j in range(m))]
+            block(commit, [f"_n{i}" for i in noisy],
+                  [sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0) for i in noisy], "n", code_t1)
+            commit.extend(f"_x{i} += _n{i}" for i in noisy)
+            block(commit, [f"_k{i}" for i in vel], [dt / 2 * f[i] for i in vel], "b", code_t1)
+            commit.extend(f"_x{i} += _k{i}" for i in vel)
+        lines.extend(f"_y{q} = _x{q} + dt * _y{v}" for q, v in st.pairs)
     quiet = ["not track"]  # the conditions under which no guard can have fired in the step
     for j, tr in enumerate(st.transitions):
         if tr.source != st.modes[k]:
             continue
-        block([f"_g{j}"], [tr.guard], f"g{j}_", {**to_y, **code_t1})
+        block(lines, [f"_g{j}"], [tr.guard], f"g{j}_", {**to_y, **code_t1})
         d = int(tr.direction)
         if d > 0:
             quiet.append(f"_g{j} < 0.0")
         elif d < 0:
             quiet.append(f"_g{j} > 0.0")
         else:
-            block([f"_h{j}"], [tr.guard], f"h{j}_")
+            block(lines, [f"_h{j}"], [tr.guard], f"h{j}_")
             quiet.append(f"not crosses(0, _h{j}, _g{j})")
-    commit = [f"_x{i} = _y{i}" for i in range(n)]
-    if scheme == "splitting":
-        # noise, then the closing kick, at the end of the step (as in the event loop)
-        after = []
-        inner = lines
-        lines = after
-        noisy = [i for i in range(n) if any(G[i, j] != 0 for j in range(m))]
-        block([f"_n{i}" for i in noisy], [sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0) for i in noisy],
-              "n", code_t1)
-        lines.extend(f"_x{i} += _n{i}" for i in noisy)
-        vel = sorted({v for _, v in st.pairs})
-        block([f"_k{i}" for i in vel], [dt / 2 * f[i] for i in vel], "b", code_t1)
-        lines.extend(f"_x{i} += _k{i}" for i in vel)
-        commit += after
-        lines = inner
     # one combined test: a single well-predicted branch in the hot loop
     lines.append(f"if {' and '.join(quiet)}:")
     lines.extend("    " + c for c in commit)
@@ -302,8 +292,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     lgns = []
     for G in st.noise:
         # L^j G_ik = sum_l G_lj dG_ik/dx_l, stored as [i, j, k] (row-major n x m x m)
-        lgns.append([sum(G[l, j] * sp.diff(G[i, kk], xs[l]) for l in range(n))
-                     for i in range(n) for j in range(m) for kk in range(m)]
+        lgns.append([_lg(G, xs, i, j, kk) for i in range(n) for j in range(m) for kk in range(m)]
                     if scheme in ("milstein", "symplectic") else [])
     rates = []
     for tr in st.transitions:
@@ -373,7 +362,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         observe=ind(names.scalar_block("ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")}),
                     " " * 16),
         fast_checks_set=fast_checks_set,
-        scheme_code={"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3}[scheme],
+        scheme_code=SCHEME_CODES[scheme],
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
         n_modes=len(st.modes), n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
@@ -674,7 +663,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
 
 
 @nb.njit(cache=CACHE)
-def drive(x0, mode0, dws, dt, t0, p, scheme, out, elog, nlog):
+def drive(x0, mode0, dws, dt, t0, p, out, elog, nlog):
     """Final states ``out`` (paths, N) of paths driven by given Brownian increments ``dws`` (paths, steps, M),
     every step through ``event_step`` (for convergence tests: sums of fine increments drive a coarse grid along
     the same Brownian path). ``elog[path]`` receives (time, transition, speed) of the path's first events and
@@ -729,7 +718,7 @@ def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, ps
 
 
 @nb.njit(nogil=True, cache=CACHE)
-def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf, scheme,
+def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
               v_scale, v_bins, vhist, counts, sums, events, gstat, track, n_phase, phase_steps,
               phist, psums, pcount, vsum, fbad):
@@ -744,8 +733,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     observables also go into ``phist[k]``, ``psums[k]`` and ``pcount[k]`` with k = (steps / phase_steps) mod
     n_phase, so that section k holds the states at t0 + (k / n_phase + i) * period exactly.
 
-    ``scheme``: 0 Euler-Maruyama, 1 Milstein (commutative noise), 2 splitting (kick, free flight, noise, kick), 3
-    symplectic Milstein (the velocities' Milstein step, then the positions' free flight at the new velocities).
+    The scheme is the module's ``SCHEME`` (``_auto_codegen.SCHEME_CODES``).
     counts: [samples, event_overflow, outside, nonfinite, joint_outside, bad_reset]; events[j]: firings of
     transition j after burn-in; vhist[j]: |rate of change of guard j| (the speed) at its firings, overflow in the
     last bin, and vsum[j] the sum of those speeds; fbad[0]: the speed at the first firing whose check failed.

@@ -58,7 +58,7 @@ class AutomatonJob:
         samples = a["n_samp"] if samples is None else samples
         zx, zk, zf = _rng.ziggurat_tables()
         module.run_chunk(rng_state, self.npaths[k], burn, samples, a["stride"], a["dt"], 0.0, a["x0"], a["mode0"],
-                         a["p"], zx, zk, zf, a["scheme"], a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
+                         a["p"], zx, zk, zf, a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
                          a["v_bins"], out["vhist"], out["counts"], out["sums"], out["events"],
                          out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"],

@@ -74,8 +74,7 @@ class AutomatonScheme:
                 )
 
 
-AUTOMATON_SCHEMES = {"em": AutomatonScheme("em", 0), "milstein": AutomatonScheme("milstein", 1),
-                     "splitting": AutomatonScheme("splitting", 2), "symplectic": AutomatonScheme("symplectic", 3)}
+AUTOMATON_SCHEMES = {name: AutomatonScheme(name, code) for name, code in _auto_codegen.SCHEME_CODES.items()}
 """Registered schemes for :func:`simulate_automaton`."""
 
 
@@ -93,9 +92,8 @@ def _commutative(st) -> bool:
         for j in range(st.n_noise):
             for k in range(j + 1, st.n_noise):
                 for i in range(n):
-                    a = sum(G[l, j] * sp.diff(G[i, k], xs[l]) for l in range(n))
-                    b = sum(G[l, k] * sp.diff(G[i, j], xs[l]) for l in range(n))
-                    if sp.simplify(a - b) != 0:
+                    # L^j G_k = L^k G_j: the Levy areas cancel
+                    if sp.simplify(_auto_codegen._lg(G, xs, i, j, k) - _auto_codegen._lg(G, xs, i, k, j)) != 0:
                         return False
     return True
 
@@ -340,7 +338,7 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     elog = np.full((dws.shape[0], int(events), 3), np.nan)
     nlog = np.zeros(dws.shape[0], dtype=np.int64)
     module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
-                 sch.code, out, elog, nlog)
+                 out, elog, nlog)
     return (out, elog, nlog) if events else out
 
 
@@ -577,7 +575,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
     }
     args = dict(n_burn=n_burn, n_samp=n_samp, stride=stride, dt=dt, x0=x0, mode0=mode_names.index(mode0),
-                p=np.array([values[k] for k in st.params], dtype=float), scheme=sch.code,
+                p=np.array([values[k] for k in st.params], dtype=float),
                 obs_lo=np.array(lo or [0.0], dtype=float), obs_scale=np.array(scale or [1.0], dtype=float),
                 obs_bins=np.array(bins or [1], dtype=np.int64), jx=jx, jy=jy, j_lo=j_lo, j_scale=j_scale,
                 j_bins=j_bins, v_scale=int(v_bins) / float(v_hi), v_bins=int(v_bins), phases=phases,

@@ -144,7 +144,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     args = dict(
         n_burn=s["n_burn"], n_samp=s["n_samp"], stride=s["stride"], dt=s["dt"], x0=np.array(s["x0"], dtype=float),
         mode0=0, p=np.array([automaton.parameters[k] for k in st.params], dtype=float),
-        scheme=_auto_runner_code("symplectic"), obs_lo=np.zeros(n_obs), obs_scale=scale, obs_bins=bins,
+        obs_lo=np.zeros(n_obs), obs_scale=scale, obs_bins=bins,
         jx=names.index("x") if xy is not None else -1, jy=names.index("y") if xy is not None else -1,
         j_lo=np.array([xlo, ylo], dtype=float), j_scale=np.array(xy_scales, dtype=float),
         j_bins=np.array([nx, ny], dtype=np.int64), v_scale=v_scale, v_bins=s["v_bins"], phases=0, phase_steps=1,
@@ -221,9 +221,3 @@ def lift_law_numbers(automaton):
     params.update({sym.name: float(num) for num, sym in values.items()})
     return HybridAutomaton(automaton.states, params, list(automaton.modes), transitions,
                            initial_mode=automaton.initial_mode, observables=dict(automaton.observables))
-
-
-def _auto_runner_code(name: str) -> int:
-    from ._auto_runner import AUTOMATON_SCHEMES
-
-    return AUTOMATON_SCHEMES[name].code
