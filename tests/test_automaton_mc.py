@@ -255,13 +255,8 @@ def test_inelastic_chattering_on_the_step_scale_is_reported():
 
 @pytest.mark.parametrize("script", ["06_equilibrium_stop.py", "07_impact_pair.py"])
 def test_examples_06_07_run_headless_and_pass_their_checks(script):
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
+    from examples_run import run_example
 
-    root = Path(__file__).resolve().parent.parent
-    res = subprocess.run([sys.executable, str(root / "examples" / script), "--quick"], capture_output=True, text=True,
-                         timeout=600, cwd=root, env=dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(root)))
+    res = run_example(script, "--quick")
     assert res.returncode == 0, res.stdout + res.stderr
     assert res.stdout.strip().splitlines()[-1] == "OK"

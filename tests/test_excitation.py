@@ -257,14 +257,8 @@ def test_a_negative_bandwidth_is_refused_by_the_engine_before_it_runs():
 
 
 def test_example_10_runs_headless_and_passes_its_checks():
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
+    from examples_run import run_example
 
-    root = Path(__file__).resolve().parent.parent
-    res = subprocess.run([sys.executable, str(root / "examples" / "10_coloured_noise.py"), "--quick"],
-                         capture_output=True, text=True, timeout=600, cwd=root,
-                         env=dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(root)))
+    res = run_example("10_coloured_noise.py", "--quick")
     assert res.returncode == 0, res.stdout + res.stderr
     assert res.stdout.strip().splitlines()[-1] == "OK"

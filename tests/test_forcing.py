@@ -279,15 +279,9 @@ def test_forced_duffing_impact_backends_agree():
 
 
 def test_example_08_runs_headless_and_passes_its_checks():
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
+    from examples_run import run_example
 
-    root = Path(__file__).resolve().parent.parent
-    res = subprocess.run([sys.executable, str(root / "examples" / "08_harmonic_random.py"), "--quick"],
-                         capture_output=True, text=True, timeout=600, cwd=root,
-                         env=dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(root)))
+    res = run_example("08_harmonic_random.py", "--quick")
     assert res.returncode == 0, res.stdout + res.stderr
     assert res.stdout.strip().splitlines()[-1] == "OK"
 

@@ -250,9 +250,9 @@ def test_forced_averaging_on_an_unmeasured_geometry_warns():
 
 
 def test_example_09_runs_headless_and_passes_its_checks():
-    res = subprocess.run([sys.executable, os.path.join(ROOT, "examples", "09_asymmetric_gap.py"), "--quick"],
-                         capture_output=True, text=True, cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT),
-                         timeout=300)
+    from examples_run import run_example
+
+    res = run_example("09_asymmetric_gap.py", "--quick", timeout=300)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "OK" in res.stdout
 
