@@ -7,8 +7,8 @@
 The reference that is always there is ``numpy_reference`` below: the same scheme as the classic semi-implicit
 Euler kernel with the crossing located on the free-flight segment, vectorised over paths with numpy (no compiler),
 written for this benchmark. An outside baseline (a module with ``run(npaths, nsteps, dt, a, b, c, D, delta, vc,
-seed, nburn, hbins, hmax) -> histogram``) is added when ``--baseline`` names one; by default the one in
-``../shared/baselines/mc_baseline.py`` is used if, and only if, that file exists beside the repository.
+seed, nburn, hbins, hmax) -> histogram``) is added when ``--baseline`` or the environment variable
+``VIBRO_MC_BASELINE`` names one; without either the benchmark runs against the numpy reference only.
 
 1. Throughput on Example 1 with impacts (a=1, b=0.2, c=0.025, D=0.05, delta=1, Ma V_C=0.4, dt=1e-3), histogram of H
    with 400 bins up to 4, every kernel on the same dt and histogram, interleaved repetitions (the machine's speed
@@ -46,8 +46,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_BASELINE = ROOT.parent / "shared" / "baselines" / "mc_baseline.py"
-"""Used when present and no --baseline is given; a clone without it runs against the numpy reference only."""
+BASELINE_ENV = "VIBRO_MC_BASELINE"
+"""Environment variable naming an outside baseline kernel when no --baseline is given."""
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
@@ -56,10 +56,10 @@ L1_BINS, H_MAX, TARGET = 40, 4.0, 0.01
 
 
 def resolve_baseline(arg):
-    """The outside baseline's path: ``arg`` ('none' disables), else the default if it exists, else None."""
+    """The outside baseline's path: ``arg`` ('none' disables), else ``$VIBRO_MC_BASELINE``, else None."""
     if arg is None:
-        return DEFAULT_BASELINE if DEFAULT_BASELINE.is_file() else None
-    if arg.lower() == "none":
+        arg = os.environ.get(BASELINE_ENV)
+    if arg is None or arg.lower() == "none":
         return None
     path = Path(arg)
     if not path.is_file():
@@ -304,7 +304,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller sizes (about a minute)")
     ap.add_argument("--baseline", default=None, metavar="PATH|none",
-                    help=f"outside baseline kernel module (default: {DEFAULT_BASELINE} if it exists, else none)")
+                    help=f"outside baseline kernel module (default: ${BASELINE_ENV} if set, else none)")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     path = resolve_baseline(args.baseline)

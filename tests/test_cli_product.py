@@ -163,7 +163,7 @@ def test_throughput_benchmark_needs_no_outside_baseline(monkeypatch, tmp_path):
     spec = importlib.util.spec_from_file_location("mc_throughput", ROOT / "benchmarks" / "mc_throughput.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    monkeypatch.setattr(bench, "DEFAULT_BASELINE", tmp_path / "absent.py")
+    monkeypatch.delenv(bench.BASELINE_ENV, raising=False)
     assert bench.resolve_baseline(None) is None and bench.load_baseline(None) is None
     assert bench.resolve_baseline("none") is None
     with pytest.raises(SystemExit):
