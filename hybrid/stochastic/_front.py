@@ -51,10 +51,9 @@ def reproduces(model, scheme) -> bool:
 class AutomatonKernel:
     """What the oscillator runner needs of a kernel: the loaded module, its path, identity and build time."""
 
-    def __init__(self, job: _auto_exec.AutomatonJob, module, identity: dict, compile_time: float):
-        self.job, self.module, self.identity, self.compile_time = job, module, identity, compile_time
+    def __init__(self, module, identity: dict, compile_time: float):
+        self.module, self.identity, self.compile_time = module, identity, compile_time
         self.path = getattr(module, "__file__", None)
-        self.source = job.src
 
 
 class AutomatonChunks:
@@ -155,7 +154,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     # the law's numbers in full precision (they are parameters of the kernel, not in its source)
     law = [float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")]
     identity = {"kernel": hashlib.sha256(src.encode()).hexdigest()[:32], "law": [model.restitution.spec(), *law]}
-    kern = AutomatonKernel(job, module, identity, time.perf_counter() - t0)
+    kern = AutomatonKernel(module, identity, time.perf_counter() - t0)
     return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
 
 
