@@ -264,12 +264,12 @@ def general_against_specialised(paths, t_end, reps):
     print(f"\n4. Same model, two kernels: Example 1 (Ma 0.4), dt={dt:g}, {paths} paths x {t_end:g}, chunks of {chunk}, "
           "interleaved, M path-steps/s (set-up included)")
 
-    def oscillator(scheme, **kw):
-        return simulate_ensemble(model, scheme, xy_bins=None, bins=400, h_max=H_MAX, kernel="oscillator", **kw)
+    def oscillator(scheme, xy=None, **kw):
+        return simulate_ensemble(model, scheme, xy_bins=xy, bins=400, h_max=H_MAX, kernel="oscillator", **kw)
 
-    def automaton(scheme, **kw):
+    def automaton(scheme, xy=None, **kw):
         if scheme == "front":  # what simulate_ensemble(model, "milstein") runs today: the automaton kernel
-            return simulate_ensemble(model, "milstein", xy_bins=None, bins=400, h_max=H_MAX, **kw)
+            return simulate_ensemble(model, "milstein", xy_bins=xy, bins=400, h_max=H_MAX, **kw)
         return simulate_automaton(auto, scheme, x0=(0.0, 0.0), histograms={"H": (0.0, H_MAX, 400)}, **kw)
 
     def mean_and_rate(r):
@@ -278,9 +278,11 @@ def general_against_specialised(paths, t_end, reps):
         return r.mean("H").value, r.mean("H").ci, sum(r.rate(t) for t in r.transitions)
 
     cases = (("milstein", "front", "simulate_ensemble milstein: oscillator kernel against the automaton kernel"),
+             ("milstein", "front", "the same with the default joint (x, y) histogram, 80 x 80 bins", (80, 80)),
              ("splitting", "splitting", "splitting (oscillator: exact OU step; automaton: kick-flight-noise-kick)"),
              ("milstein", "milstein", "oscillator milstein against the automaton's explicit milstein"))
-    for scheme, auto_scheme, label in cases:
+    for scheme, auto_scheme, label, *xy in cases:
+        common["xy"] = xy[0] if xy else None
         warm = {**common, "paths": chunk, "t_end": t_burn + 1.0}
         oscillator(scheme, **warm)
         automaton(auto_scheme, **warm)

@@ -18,10 +18,13 @@ most ``MAX_EVENTS`` of them; the excess is counted and reported.
 Speed: paths run in 8 interleaved lanes, and each step runs first as generated straight-line code on scalars (the
 mode's drift, only the nonzero noise entries, the guards at the end of the flight). Only a step at whose end a
 guard may have fired (a direction +1 guard not below 0, or any sign change of a direction 0 guard) goes through the
-general event loop ``event_step``. On Example 1 (``benchmarks/mc_throughput.py``, section 4) this brought the
-kernel from 0.47 to 1.03 of the oscillator kernel's throughput with splitting and from 0.25 to 0.81 with the
-explicit milstein; the oscillator front end (``symplectic``, five summed observables) runs at 0.74-0.85 of the
-oscillator kernel it replaces, depending on the build.
+general event loop ``event_step``, and that after the lane loop, so that the loop holds no call (a call's arguments
+stay live across the loop and push its numbers out of the registers). The statistics, and the joint histogram,
+run in lane loops of their own; one NaN test covers all observables of a sample; expressions of the parameters and
+the step are bound once before the loops. On Example 1 (``benchmarks/mc_throughput.py``, section 4) the kernel
+runs splitting at 1.16 and the explicit milstein at 0.93 of the oscillator kernel's throughput (0.47 and 0.25
+before these measures), and the oscillator front end (``symplectic``) at 0.95 (0.97 with the joint histogram).
+The figures move by a few per cent with changes that add live numbers to ``run_chunk``: measure, do not guess.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from hybrid.errors import ModelError
 
 from ._codegen import _Printer
 
-TEMPLATE_VERSION = "5"
+TEMPLATE_VERSION = "6"
 SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3}
 """The generated module's ``SCHEME``: Euler-Maruyama, Milstein (commutative noise), splitting (kick, free flight,
 noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight)."""
@@ -146,16 +149,43 @@ class _Names:
         self.subs[TIME] = sp.Symbol("t")
         self.printer = _Printer({"standard": "python3"})
         self.n, self.np = len(st.states), len(st.params)
+        # loop invariants of run_chunk: the parameters and the step; their expressions are bound once, before the
+        # loops (LLVM does not hoist them itself where that would reorder floating-point operations)
+        self.invariant = {sp.Symbol(f"_p{j}") for j in range(self.np)} | {sp.Symbol("dt"), sp.Symbol("sdt")}
+        self.hoisted: dict = {}
+
+    def hoist(self, e):
+        """``e`` (in code names) with each largest sub-expression of the loop invariants replaced by a name
+        ``_hK`` bound in :meth:`hoisted_lines`; in sums and products the invariant terms or factors are grouped."""
+        if e.is_Atom:
+            return e
+        if isinstance(e, sp.Expr) and e.free_symbols <= self.invariant:
+            return self._bind(e)
+        if isinstance(e, (sp.Add, sp.Mul)):
+            fixed = [a for a in e.args if a.free_symbols <= self.invariant]
+            rest = [self.hoist(a) for a in e.args if not a.free_symbols <= self.invariant]
+            if len(fixed) > 1 or (fixed and not fixed[0].is_Atom):
+                fixed = [self._bind(e.func(*fixed))]
+            return e.func(*fixed, *rest)
+        return e.func(*[self.hoist(a) for a in e.args])
+
+    def _bind(self, e):
+        if e not in self.hoisted:
+            self.hoisted[e] = sp.Symbol(f"_h{len(self.hoisted)}")
+        return self.hoisted[e]
+
+    def hoisted_lines(self) -> list[str]:
+        return [f"{name} = {self.printer.doprint(e)}" for e, name in self.hoisted.items()]
 
     def unpack(self) -> list[str]:
         return [f"_x{i} = x[{i}]" for i in range(self.n)] + [f"_p{j} = p[{j}]" for j in range(self.np)]
 
     def scalar_block(self, target: str, outputs: list, extra: dict) -> str:
-        """Straight-line code ``target[i] = ...`` of ``outputs`` on the kernel's scalars ``_x0, ...``."""
-        exprs = [sp.sympify(e).xreplace(self.subs).xreplace(extra) for e in outputs]
+        """Straight-line code ``{target}0 = ...`` (scalars) of ``outputs`` on the kernel's scalars ``_x0, ...``."""
+        exprs = [self.hoist(sp.sympify(e).xreplace(self.subs).xreplace(extra)) for e in outputs]
         reps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_o"))
         body = [f"{s} = {self.printer.doprint(e)}" for s, e in reps]
-        body += [f"{target}[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
+        body += [f"{target}{i} = float({self.printer.doprint(e)})" for i, e in enumerate(reduced)]
         return "\n".join(body)
 
     def function(self, name: str, outputs: list, target: str | None) -> str:
@@ -221,6 +251,7 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
         exprs = [sp.sympify(e).xreplace(names.subs) for e in exprs]
         if extra:
             exprs = [e.xreplace(extra) for e in exprs]
+        exprs = [names.hoist(e) for e in exprs]
         reps, red = sp.cse(exprs, symbols=sp.numbered_symbols(pre + tag))
         out.extend(f"{s_} = {names.printer.doprint(e)}" for s_, e in reps)
         out.extend(f"{tg} = {names.printer.doprint(e)}" for tg, e in zip(targets, red))
@@ -278,11 +309,13 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
 
 
 def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
-                    cache: bool = True, summed=(), phases: bool = False) -> tuple[str, AutomatonStructure]:
+                    cache: bool = True, summed=(), phases: bool = False,
+                    joint_only=()) -> tuple[str, AutomatonStructure]:
     """The numba module source of ``scheme`` for ``automaton`` and the structure it was derived from.
 
     ``observables`` maps names to sympy expressions of the states, parameters and ``t``; those named in
-    ``summed`` are only summed (means and the joint histogram), not histogrammed. Phase sections are compiled in
+    ``summed`` are only summed (means and the joint histogram), not histogrammed; those named in ``joint_only``
+    only feed the joint histogram (no sum, no histogram of their own: both stay zero). Phase sections are compiled in
     only with ``phases=True`` (they cost about 10 % of the compile time).
     """
     st = analyse(automaton, convention)
@@ -336,17 +369,18 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     fast_checks_set = scheme != "splitting" or all(
         not (sp.sympify(tr.guard).free_symbols & velocities) for tr in st.transitions)
     ind = textwrap.indent
+    observe = names.scalar_block("_ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")})
     src = _TEMPLATE.format(
-        unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + [
+        unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines() + [
             f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
             for o in range(len(obs))]) or "pass", " " * 4),
-        binning=ind("\n".join((_SUMMING if name in summed else _BINNING).format(o=o)
-                               for o, name in enumerate(observables)) or "pass", " " * 16),
+        binning=ind(_binning(list(observables), summed, joint_only), " " * 16),
+        to_ob=ind("\n".join(f"ob[{o}] = _ob{o}" for o in range(len(obs))) or "pass", " " * 20),
         flush=ind("\n".join(f"sums[{o}] += _sum{o}" for o in range(len(obs))) or "pass",
                   " " * 4),
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
         init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
-        to_array_s=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
+        to_array_s=ind("\n".join(f"x[{i}] = _L{i}[_l]" for i in range(n)), " " * 16),
         phase_block=ind(_PHASES.format(pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 8))
                         if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
                         " " * 12),
@@ -355,12 +389,12 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         draw=ind("\n".join(f"z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)\n_w{k} = sdt * z"
                            for k in range(m)) + "\n_slow = False", " " * 16),
         fast=ind("\n".join(fast), " " * 16),
-        store_dw=ind("\n".join(f"dw[{k}] = _w{k}" for k in range(m)), " " * 20),
-        reload=ind("\n".join(f"_x{i} = x[{i}]" for i in range(n)), " " * 20),
+        store_dw=ind("\n".join(f"DWL[npend, {k}] = _w{k}" for k in range(m)), " " * 20),
+        load_dw=ind("\n".join(f"dw[{k}] = DWL[_q, {k}]" for k in range(m)), " " * 16),
+        reload=ind("\n".join(f"_L{i}[_l] = x[{i}]" for i in range(n)), " " * 16),
         store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
         to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
-        observe=ind(names.scalar_block("ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")}),
-                    " " * 16),
+        observe=ind(observe, " " * 16),
         fast_checks_set=fast_checks_set,
         scheme_code=SCHEME_CODES[scheme],
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
@@ -383,10 +417,40 @@ if phase_now:
                  phist, psums, pcount)"""
 
 
-# one observable of a sample: sums in registers (written once per chunk), the histogram with under/overflow bins;
+def _binning(names: list, summed, joint_only=()) -> str:
+    """A sample's statistics: sums in registers (written once per chunk), histograms with under/overflow bins.
+
+    A NaN observable is counted, not summed or binned. One test settles it for all of them (the sum of the
+    observables is NaN if any is, and a NaN from inf - inf only sends the sample the careful way), so a finite
+    sample costs one well-predicted branch.
+    """
+    kept = [(o, name) for o, name in enumerate(names) if name not in joint_only]
+    if not kept:
+        return "pass"
+    fast = [(_SUMMING_FINITE if name in summed else _BINNING_FINITE).format(o=o) for o, name in kept]
+    slow = [(_SUMMING if name in summed else _BINNING).format(o=o) for o, name in kept]
+    total = " + ".join(f"_ob{o}" for o, _ in kept)
+    return "\n".join([f"_tot = {total}", "if _tot == _tot:", textwrap.indent("\n".join(fast), "    "), "else:",
+                      textwrap.indent("\n".join(slow), "    ")])
+
+
+_BINNING_FINITE = """\
+_b = (_ob{o} - _lo{o}) * _sc{o}
+if _b >= 0.0 and _b < _nb{o}:
+    hist[{o}, int(_b) + 1] += 1
+elif _b < 0.0:
+    hist[{o}, 0] += 1
+else:
+    hist[{o}, _nb{o} + 1] += 1
+_sum{o} += _ob{o}"""
+
+
+_SUMMING_FINITE = "_sum{o} += _ob{o}"
+
+
 # NaN fails every comparison, so it is tested for only where the value is not in a bin (it is counted, not summed)
 _BINNING = """\
-_v = ob[{o}]
+_v = _ob{o}
 _b = (_v - _lo{o}) * _sc{o}
 if _b >= 0.0 and _b < _nb{o}:
     hist[{o}, int(_b) + 1] += 1
@@ -401,7 +465,7 @@ _sum{o} += _v"""
 
 
 _SUMMING = """\
-_v = ob[{o}]
+_v = _ob{o}
 if _v != _v:
     counts[3] += 1
     _v = 0.0
@@ -717,6 +781,18 @@ def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, ps
                 phist[kp, o, int(b) + 1] += 1
 
 
+@nb.njit(cache=CACHE)
+def outside(mode, x, t, p):
+    # the admissible set: no self-loop guard of the mode may be beyond its firing side
+    for jj in range(COUNT[mode]):
+        j = FIRST[mode] + jj
+        if SELF_LOOP[j] == 1:
+            gj = guard(j, x, t, p)
+            if (DIRECTION[j] > 0 and gj > 1e-9) or (DIRECTION[j] < 0 and gj < -1e-9):
+                return True
+    return False
+
+
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
@@ -749,7 +825,9 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     ob = np.empty(N_OBS)
     XL = np.empty((LANES, N))
     ML = np.empty(LANES, dtype=np.int64)
-    SL = np.zeros(LANES, dtype=np.bool_)
+    PL = np.empty(LANES, dtype=np.int64)  # lanes of this step that go through event_step, and their increments
+    DWL = np.empty((LANES, M))
+    JL = np.empty((LANES, 2))  # the lanes' coordinates in the joint histogram
     elog = np.empty((0, 3))  # ensembles keep no event log
     iw = np.zeros(IW, dtype=np.int64)
     fw = np.zeros(FW)
@@ -764,7 +842,6 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
         for _l in range(nl):
 {init}
             ML[_l] = mode0
-            SL[_l] = False
         cs = 0
         for step in range(n_burn + n_samp * stride):
             rec = step >= n_burn
@@ -778,44 +855,50 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                 if cs >= stride:
                     cs = 0
                     sample = True
+            npend = 0
             for _l in range(nl):
 {load}
 {draw}
 {fast}
-                if _slow:
-{to_array_s}
+                if _slow:  # the step is redone by event_step below, after the lane loop (no call in this loop)
 {store_dw}
-                    mode = event_step(mode, x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
-                                      elog)
-                    ML[_l] = mode
-                    SL[_l] = True  # until the next sample: its admissible-set check is not settled
-{reload}
+                    PL[npend] = _l
+                    npend += 1
 {store}
+            # the lanes whose guard may have fired, in lane order (event_step draws no normals, so the order of
+            # the draws, and every number, is that of a call inside the loop)
+            for _q in range(npend):
+                _l = PL[_q]
+{to_array_s}
+{load_dw}
+                mode = event_step(ML[_l], x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
+                                  elog)
+                ML[_l] = mode
+{reload}
+                # the admissible set at a sample; a fast step settles it itself (its guards are tested inside)
+                if sample and FAST_CHECKS_SET and outside(mode, x, _t1, p):
+                    counts[2] += 1
             # statistics in loops of their own: the stepping loop above, and the time average's loop, stay short
 {phase_block}
             if not sample:
                 continue
             for _l in range(nl):
 {load}
-                _slow = SL[_l]
 {observe}
                 _nsamp += 1
-                # the admissible set: no self-loop guard of this mode may be beyond its firing side (the fast
-                # step has already checked the guards where that settles it)
-                if _slow or not FAST_CHECKS_SET:
-                    SL[_l] = False
+                if not FAST_CHECKS_SET:  # the splitting's noise and kick after the flight can move a guard
 {to_array}
-                    for jj in range(COUNT[mode]):
-                        j = FIRST[mode] + jj
-                        if SELF_LOOP[j] == 1:
-                            gj = guard(j, x, _t1, p)
-                            if (DIRECTION[j] > 0 and gj > 1e-9) or (DIRECTION[j] < 0 and gj < -1e-9):
-                                counts[2] += 1
-                                break
+                    if outside(mode, x, _t1, p):
+                        counts[2] += 1
 {binning}
                 if jx >= 0:
-                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
-                    by = (ob[jy] - j_lo[1]) * j_scale[1]
+{to_ob}
+                    JL[_l, 0] = ob[jx]
+                    JL[_l, 1] = ob[jy]
+            if jx >= 0:  # the joint histogram in a loop of its own, like the stepping and the sums
+                for _l in range(nl):
+                    bx = (JL[_l, 0] - j_lo[0]) * j_scale[0]
+                    by = (JL[_l, 1] - j_lo[1]) * j_scale[1]
                     if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
                         jhist[int(by), int(bx)] += 1
                     else:

@@ -31,7 +31,8 @@ KERNELS = ("auto", "automaton", "oscillator")
 """Values of ``MonteCarloAlgorithm.kernel``: ``auto`` takes the automaton kernel wherever it reproduces the scheme."""
 
 _X, _Y = real_symbol("x"), real_symbol("y")
-_SUMMED = ("x2", "y2", "below", "x", "y")
+_SUMMED = ("x2", "y2", "below")
+_JOINT = ("x", "y")  # the joint histogram's coordinates: neither summed nor histogrammed on their own
 
 
 def reproduces(model, scheme) -> bool:
@@ -180,7 +181,8 @@ def _generated(model):
         else:
             below = sp.Integer(1)
         observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
-        src, st = _auto_codegen.generate_source(automaton, "symplectic", observables, summed=_SUMMED)
+        src, st = _auto_codegen.generate_source(automaton, "symplectic", observables, summed=_SUMMED,
+                                                joint_only=_JOINT)
         if len(_GENERATED) > 256:
             _GENERATED.clear()
         _GENERATED[key] = (automaton, observables, src, st)
