@@ -22,11 +22,12 @@ seed, nburn, hbins, hmax) -> histogram``) is added when ``--baseline`` or the en
    from nothing in a fresh process with an empty cache (compilation included) and with a warm cache; the baseline
    kernel at dt = 1e-3 (compilation excluded).
 4. One declaration, two kernels, in the same run, interleaved, same dt, paths, chunks and histogram:
-   ``simulate_ensemble(model, "milstein")`` on the oscillator kernel (``kernel="oscillator"``, the path before the
-   automaton front end) against the default, which runs it on the kernel generated from ``model.to_automaton()``
-   (same streams and step: E[H] and the impact rate must agree to rounding); then the automaton's own splitting
-   and explicit milstein against the oscillator's schemes of the same names (different schemes: the statistics
-   agree within their intervals, the streams are the same but the paths are not).
+   ``simulate_ensemble(model, "milstein")`` and ``(model, "splitting")`` on the oscillator kernel
+   (``kernel="oscillator"``, the path before the automaton front end) against the default, which runs them on the
+   kernel generated from ``model.to_automaton()`` (its symplectic and baoab schemes: same streams and steps, so E[H]
+   and the impact rate must agree to rounding), milstein also with the default joint histogram; then the
+   automaton's own splitting and explicit milstein against the oscillator's schemes of the same names (different
+   schemes: the statistics agree within their intervals, the streams are the same but the paths are not).
 
 """
 
@@ -268,8 +269,8 @@ def general_against_specialised(paths, t_end, reps):
         return simulate_ensemble(model, scheme, xy_bins=xy, bins=400, h_max=H_MAX, kernel="oscillator", **kw)
 
     def automaton(scheme, xy=None, **kw):
-        if scheme == "front":  # what simulate_ensemble(model, "milstein") runs today: the automaton kernel
-            return simulate_ensemble(model, "milstein", xy_bins=xy, bins=400, h_max=H_MAX, **kw)
+        if scheme.startswith("front:"):  # what simulate_ensemble(model, scheme) runs by default: the automaton kernel
+            return simulate_ensemble(model, scheme[6:], xy_bins=xy, bins=400, h_max=H_MAX, **kw)
         return simulate_automaton(auto, scheme, x0=(0.0, 0.0), histograms={"H": (0.0, H_MAX, 400)}, **kw)
 
     def mean_and_rate(r):
@@ -277,9 +278,12 @@ def general_against_specialised(paths, t_end, reps):
             return r.mean_energy.value, r.mean_energy.ci, r.impact_rate.value
         return r.mean("H").value, r.mean("H").ci, sum(r.rate(t) for t in r.transitions)
 
-    cases = (("milstein", "front", "simulate_ensemble milstein: oscillator kernel against the automaton kernel"),
-             ("milstein", "front", "the same with the default joint (x, y) histogram, 80 x 80 bins", (80, 80)),
-             ("splitting", "splitting", "splitting (oscillator: exact OU step; automaton: kick-flight-noise-kick)"),
+    cases = (("milstein", "front:milstein",
+              "simulate_ensemble milstein: oscillator kernel against the automaton kernel (symplectic)"),
+             ("milstein", "front:milstein", "the same with the default joint (x, y) histogram, 80 x 80 bins", (80, 80)),
+             ("splitting", "front:splitting",
+              "simulate_ensemble splitting: oscillator kernel against the automaton kernel (baoab)"),
+             ("splitting", "splitting", "oscillator splitting against the automaton's kick-flight-noise-kick"),
              ("milstein", "milstein", "oscillator milstein against the automaton's explicit milstein"))
     for scheme, auto_scheme, label, *xy in cases:
         common["xy"] = xy[0] if xy else None

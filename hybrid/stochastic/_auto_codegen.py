@@ -41,9 +41,10 @@ from hybrid.errors import ModelError
 from ._codegen import _Printer
 
 TEMPLATE_VERSION = "6"
-SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3}
+SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4}
 """The generated module's ``SCHEME``: Euler-Maruyama, Milstein (commutative noise), splitting (kick, free flight,
-noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight)."""
+noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight), BAOAB (kick by
+the force, half flight, exact Ornstein-Uhlenbeck step of the velocities, half flight, kick)."""
 MAX_EVENTS = 64
 """Events handled within one time step; more are counted as ``event_overflow`` (chattering or Zeno)."""
 TIME = real_symbol("t")
@@ -151,8 +152,9 @@ class _Names:
         self.n, self.np = len(st.states), len(st.params)
         # loop invariants of run_chunk: the parameters and the step; their expressions are bound once, before the
         # loops (LLVM does not hoist them itself where that would reorder floating-point operations)
-        self.invariant = {sp.Symbol(f"_p{j}") for j in range(self.np)} | {sp.Symbol("dt"), sp.Symbol("sdt")}
+        self.invariant = {sp.Symbol(f"_p{j}") for j in range(self.np)} | {sp.Symbol(n) for n in ("dt", "sdt", "hdt")}
         self.hoisted: dict = {}
+        self.preamble: list = []  # code run once before the loops (before the hoisted names: they may use it)
 
     def hoist(self, e):
         """``e`` (in code names) with each largest sub-expression of the loop invariants replaced by a name
@@ -175,7 +177,24 @@ class _Names:
         return self.hoisted[e]
 
     def hoisted_lines(self) -> list[str]:
-        return [f"{name} = {self.printer.doprint(e)}" for e, name in self.hoisted.items()]
+        return self.preamble + [f"{name} = {self.printer.doprint(e)}" for e, name in self.hoisted.items()]
+
+    def ou_factors(self, lines: list, tag: str, c) -> None:
+        """Code for ``_oa{tag}`` = exp(-c dt) and ``_oc{tag}`` = sqrt((1 - exp(-2 c dt)) / (2 c dt)), the exact
+        Ornstein-Uhlenbeck step y -> _oa y + _oc (G dW) with damping rate ``c`` (in code names; c dt -> 0 safe).
+        Once before the loops where ``c`` is a loop invariant, else appended to ``lines``."""
+        code = [f"_kd = ({self.printer.doprint(c)}) * dt",
+                "if abs(_kd) < 1e-12:",
+                f"    _oa{tag} = 1.0 - _kd",
+                f"    _oc{tag} = 1.0",
+                "else:",
+                f"    _oa{tag} = math.exp(-_kd)",
+                f"    _oc{tag} = math.sqrt(-math.expm1(-2.0 * _kd) / (2.0 * _kd))"]
+        if c.free_symbols <= self.invariant:
+            self.preamble.extend(code)
+            self.invariant |= {sp.Symbol(f"_oa{tag}"), sp.Symbol(f"_oc{tag}")}
+        else:
+            lines.extend(code)
 
     def unpack(self) -> list[str]:
         return [f"_x{i} = x[{i}]" for i in range(self.n)] + [f"_p{j} = p[{j}]" for j in range(self.np)]
@@ -222,6 +241,30 @@ class _Names:
             lines.append(f"return {default}")
         sig = f"def {name}(_which, x, t, p):" if target is None else f"def {name}(_which, x, t, p, {target}):"
         return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(lines), "    ") + "\n"
+
+
+def ou_parts(st: AutomatonStructure, k: int) -> list:
+    """BAOAB's pieces of mode ``k``: ``(v, F, c)`` per velocity state v, with drift_v = F(q, t) - c(q, t) v.
+
+    Raises :class:`ModelError` where the mode's velocity drift is not of that form (damping that is nonlinear in
+    the velocity, or couples velocities) or its noise depends on a velocity: BAOAB's O step would not be exact.
+    """
+    xs = [real_symbol(s) for s in st.states]
+    vel = sorted({v for _, v in st.pairs})
+    parts = []
+    for v in vel:
+        f = st.drift[k][v]
+        others = [xs[u] for u in vel if u != v and sp.diff(f, xs[u]) != 0]
+        if others or sp.simplify(sp.diff(f, xs[v], 2)) != 0:
+            raise ModelError(
+                f"scheme 'baoab' needs each velocity's drift to be F(positions, t) - c(positions, t) * itself; "
+                f"d{st.states[v]}/dt = {f} in mode {st.modes[k]!r} is not: use scheme='symplectic' or 'splitting'")
+        if any(sp.diff(st.noise[k][v, j], xs[u]) != 0 for j in range(st.n_noise) for u in vel):
+            raise ModelError(
+                f"scheme 'baoab' needs noise that does not depend on the velocities (mode {st.modes[k]!r}): use "
+                "scheme='symplectic'")
+        parts.append((v, sp.expand(f.subs(xs[v], 0)), sp.expand(-sp.diff(f, xs[v]))))
+    return parts
 
 
 def _lg(G, xs, i: int, j: int, k: int):
@@ -271,7 +314,28 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
     code_t1 = {sp.Symbol("t"): t1}
     to_y = {sp.Symbol(f"_x{i}"): ys[i] for i in range(n)}
     vel = sorted({v for _, v in st.pairs})
-    if scheme in ("em", "milstein"):
+    half = []  # BAOAB's guard values at the half step, g(mid), per transition
+    if scheme == "baoab":
+        hdt, tm = sp.Symbol("hdt"), sp.Symbol("_tm")
+        code_tm = {sp.Symbol("t"): tm}
+        parts = ou_parts(st, k)
+        lines.append("_tm = t + hdt")
+        block(lines, [f"_y{v}" for v, _, _ in parts], [xs[v] + hdt * F for v, F, _ in parts], "a")
+        lines.extend(f"_y{q} = _x{q} + hdt * _y{v}" for q, v in st.pairs)
+        for j, tr in enumerate(st.transitions):
+            if tr.source == st.modes[k]:
+                block(lines, [f"_m{j}"], [tr.guard], f"m{j}_", {**to_y, **code_tm})
+        for v, _, c in parts:  # O: exact OU step of each velocity at the half step's positions
+            names.ou_factors(lines, f"{k}_{v}", sp.sympify(c).xreplace(names.subs).xreplace({**to_y, **code_tm}))
+            noise_v = sum(G[v, j] * w[j] for j in range(m) if G[v, j] != 0)
+            block(lines, [f"_y{v}"], [sp.Symbol(f"_oa{k}_{v}") * ys[v] + sp.Symbol(f"_oc{k}_{v}") * noise_v], "o",
+                  {**to_y, **code_tm})
+        lines.extend(f"_y{q} = _y{q} + hdt * _y{v}" for q, v in st.pairs)
+        # the closing kick after the commit (it moves no position, so no guard of the positions)
+        block(commit, [f"_k{v}" for v, _, _ in parts], [hdt * F for _, F, _ in parts], "b", code_t1)
+        commit.extend(f"_x{v} += _k{v}" for v, _, _ in parts)
+        half = [j for j, tr in enumerate(st.transitions) if tr.source == st.modes[k]]
+    elif scheme in ("em", "milstein"):
         block(lines, [f"_y{i}" for i in range(n)], [xs[i] + increment(i, scheme == "milstein") for i in range(n)],
               "a")
     else:
@@ -294,12 +358,15 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
         block(lines, [f"_g{j}"], [tr.guard], f"g{j}_", {**to_y, **code_t1})
         d = int(tr.direction)
         if d > 0:
-            quiet.append(f"_g{j} < 0.0")
+            quiet.extend([f"_m{j} < 0.0"] * (j in half) + [f"_g{j} < 0.0"])
         elif d < 0:
-            quiet.append(f"_g{j} > 0.0")
+            quiet.extend([f"_m{j} > 0.0"] * (j in half) + [f"_g{j} > 0.0"])
         else:
             block(lines, [f"_h{j}"], [tr.guard], f"h{j}_")
-            quiet.append(f"not crosses(0, _h{j}, _g{j})")
+            if j in half:
+                quiet.append(f"not crosses(0, _h{j}, _m{j}) and not crosses(0, _m{j}, _g{j})")
+            else:
+                quiet.append(f"not crosses(0, _h{j}, _g{j})")
     # one combined test: a single well-predicted branch in the hot loop
     lines.append(f"if {' and '.join(quiet)}:")
     lines.extend("    " + c for c in commit)
@@ -348,6 +415,16 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         names.dispatch("grate", [[r] for r in rates], None),
         names.dispatch("check", [[tr.check if tr.check is not None else sp.true] for tr in trs], None, "True"),
     ]
+    # BAOAB's force and damping rate per velocity (zeros for the other schemes: their code never calls these)
+    force, damping = [], []
+    for k in range(len(st.modes)):
+        fk, ck = [sp.Integer(0)] * n, [sp.Integer(0)] * n
+        if scheme == "baoab":
+            for v, F, c in ou_parts(st, k):
+                fk[v], ck[v] = F, c
+        force.append(fk)
+        damping.append(ck)
+    funcs += [names.dispatch("bforce", force, "out"), names.dispatch("odamp", damping, "out")]
     obs = list(observables.values())
     funcs.append(names.function("_observe", obs if obs else [sp.Integer(0)], "out"))
     # per mode: the transitions leaving it (indices into st.transitions), in priority order
@@ -366,7 +443,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     # the fast step's guard tests settle the admissible-set check of a sample, unless the splitting's noise and
     # kick after the flight move a guard that depends on velocities
     velocities = {real_symbol(st.states[v]) for _, v in st.pairs}
-    fast_checks_set = scheme != "splitting" or all(
+    fast_checks_set = scheme not in ("splitting", "baoab") or all(
         not (sp.sympify(tr.guard).free_symbols & velocities) for tr in st.transitions)
     ind = textwrap.indent
     observe = names.scalar_block("_ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")})
@@ -396,7 +473,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
         observe=ind(observe, " " * 16),
         fast_checks_set=fast_checks_set,
-        scheme_code=SCHEME_CODES[scheme],
+        scheme_code=SCHEME_CODES[scheme], legs=2 if scheme == "baoab" else 1,
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
         n_modes=len(st.modes), n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
@@ -504,6 +581,7 @@ POS = np.array({positions}, dtype=np.int64)
 VEL = np.array({velocities}, dtype=np.int64)
 N_POS = {n_pos}
 LANES = 8
+LEGS = {legs}
 WORK = 6 * N + N * M + N * M * M
 # event_step's outputs packed in two arrays (every array argument of a call in the hot loop costs registers):
 # iw = [counts 0..5, events per transition, the event-log count], fw = [speed sums per transition, first failed
@@ -599,10 +677,14 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
     G = ws[6 * N:6 * N + N * M]
     L = ws[6 * N + N * M:WORK]
     free_flight = SCHEME >= 2  # a constant of the module: the other schemes' code is never compiled
-    frac = 1.0  # share of the step still to run
     if SCHEME == 2:
         # kick: velocities by half the drift
         drift(mode, x, t, p, f)
+        for k in range(N_POS):
+            x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+    elif SCHEME == 4:
+        # BAOAB: kick by the force (the drift without its damping); half flight, O, half flight below; kick
+        bforce(mode, x, t, p, f)
         for k in range(N_POS):
             x[VEL[k]] += 0.5 * dt * f[VEL[k]]
     elif SCHEME == 3:
@@ -625,93 +707,115 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
         for kv in range(N_POS):
             x[VEL[kv]] += xr[VEL[kv]]
     n_ev = 0
-    while True:
-        tau = frac * dt
-        for i in range(N):
-            xa[i] = x[i]
-            va[i] = x[i]
-        if free_flight:
+    span = dt / LEGS  # BAOAB flies in two halves with its OU step between them
+    for leg in range(LEGS):
+        frac = 1.0  # share of the leg still to run
+        while True:
+            tau = frac * span
             for i in range(N):
-                xb[i] = xa[i]
-            for k in range(N_POS):
-                xb[POS[k]] = xa[POS[k]] + tau * xa[VEL[k]]
-        else:
-            drift(mode, xa, t, p, f)
-            noise(mode, xa, t, p, G)
-            for i in range(N):
-                acc = f[i] * tau
-                for k in range(M):
-                    acc += G[i * M + k] * dw[k] * frac
-                xb[i] = xa[i] + acc
-            if SCHEME == 1:
-                lgn(mode, xa, t, p, L)
+                xa[i] = x[i]
+                va[i] = x[i]
+            if free_flight:
                 for i in range(N):
-                    acc = 0.0
-                    for jn in range(M):
-                        for k in range(M):
-                            prod = dw[jn] * dw[k] * frac * frac
-                            if jn == k:
-                                prod -= tau
-                            acc += L[(i * M + jn) * M + k] * prod
-                    xb[i] += 0.5 * acc
-        # earliest crossing among the transitions leaving this mode
-        best = -1
-        best_s = 2.0
-        for jj in range(COUNT[mode]):
-            j = FIRST[mode] + jj
-            g0 = guard(j, xa, t, p)
-            g1 = guard(j, xb, t + tau, p)
-            if track:
-                dg = g1 - g0
-                gs = FW_GSTAT + 4 * j
-                fw[gs] += dg * dg
-                fw[gs + 1] += 1.0
-                if g0 < fw[gs + 2]:
-                    fw[gs + 2] = g0
-                if g0 > fw[gs + 3]:
-                    fw[gs + 3] = g0
-            if crosses(DIRECTION[j], g0, g1):
-                sj = locate(j, xa, va, xb, t, tau, p, free_flight, g0, g1, xs)
-                if sj < best_s:
-                    best_s = sj
-                    best = j
-        if best < 0:
-            for i in range(N):
-                x[i] = xb[i]
-            break
-        interpolate(xa, va, xb, best_s, tau, free_flight, xs)
-        speed = abs(grate(best, xs, t + best_s * tau, p))
-        if not check(best, xs, t + best_s * tau, p):
-            # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
-            if iw[5] == 0:
-                fw[FW_FBAD] = speed
-            iw[5] += 1
-        k_log = iw[IW_NLOG]
-        if k_log < elog.shape[0]:  # the event log of driven paths (empty in ensembles)
-            elog[k_log, 0] = t + best_s * tau
-            elog[k_log, 1] = best
-            elog[k_log, 2] = speed
-        iw[IW_NLOG] += 1
-        if rec:
-            iw[IW_EVENTS + best] += 1
-            fw[best] += speed
-            vb = speed * v_scale
-            if vb < v_bins:
-                vhist[best, int(vb)] += 1
+                    xb[i] = xa[i]
+                for k in range(N_POS):
+                    xb[POS[k]] = xa[POS[k]] + tau * xa[VEL[k]]
             else:
-                vhist[best, v_bins] += 1
-        reset(best, xs, t + best_s * tau, p, xr)
-        for i in range(N):
-            x[i] = xr[i]
-        mode = TARGET[best]
-        t += best_s * tau
-        frac *= 1.0 - best_s
-        n_ev += 1
-        if n_ev >= MAX_EVENTS:
-            # chattering or Zeno inside one step: stop resolving it, keep the state, count it
+                drift(mode, xa, t, p, f)
+                noise(mode, xa, t, p, G)
+                for i in range(N):
+                    acc = f[i] * tau
+                    for k in range(M):
+                        acc += G[i * M + k] * dw[k] * frac
+                    xb[i] = xa[i] + acc
+                if SCHEME == 1:
+                    lgn(mode, xa, t, p, L)
+                    for i in range(N):
+                        acc = 0.0
+                        for jn in range(M):
+                            for k in range(M):
+                                prod = dw[jn] * dw[k] * frac * frac
+                                if jn == k:
+                                    prod -= tau
+                                acc += L[(i * M + jn) * M + k] * prod
+                        xb[i] += 0.5 * acc
+            # earliest crossing among the transitions leaving this mode
+            best = -1
+            best_s = 2.0
+            for jj in range(COUNT[mode]):
+                j = FIRST[mode] + jj
+                g0 = guard(j, xa, t, p)
+                g1 = guard(j, xb, t + tau, p)
+                if track:
+                    dg = g1 - g0
+                    gs = FW_GSTAT + 4 * j
+                    fw[gs] += dg * dg
+                    fw[gs + 1] += 1.0
+                    if g0 < fw[gs + 2]:
+                        fw[gs + 2] = g0
+                    if g0 > fw[gs + 3]:
+                        fw[gs + 3] = g0
+                if crosses(DIRECTION[j], g0, g1):
+                    sj = locate(j, xa, va, xb, t, tau, p, free_flight, g0, g1, xs)
+                    if sj < best_s:
+                        best_s = sj
+                        best = j
+            if best < 0:
+                for i in range(N):
+                    x[i] = xb[i]
+                break
+            interpolate(xa, va, xb, best_s, tau, free_flight, xs)
+            speed = abs(grate(best, xs, t + best_s * tau, p))
+            if not check(best, xs, t + best_s * tau, p):
+                # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
+                if iw[5] == 0:
+                    fw[FW_FBAD] = speed
+                iw[5] += 1
+            k_log = iw[IW_NLOG]
+            if k_log < elog.shape[0]:  # the event log of driven paths (empty in ensembles)
+                elog[k_log, 0] = t + best_s * tau
+                elog[k_log, 1] = best
+                elog[k_log, 2] = speed
+            iw[IW_NLOG] += 1
             if rec:
-                iw[1] += 1
-            break
+                iw[IW_EVENTS + best] += 1
+                fw[best] += speed
+                vb = speed * v_scale
+                if vb < v_bins:
+                    vhist[best, int(vb)] += 1
+                else:
+                    vhist[best, v_bins] += 1
+            reset(best, xs, t + best_s * tau, p, xr)
+            for i in range(N):
+                x[i] = xr[i]
+            mode = TARGET[best]
+            t += best_s * tau
+            frac *= 1.0 - best_s
+            n_ev += 1
+            if n_ev >= MAX_EVENTS:
+                # chattering or Zeno inside one step: stop resolving it, keep the state, count it
+                if rec:
+                    iw[1] += 1
+                break
+        if SCHEME == 4 and leg == 0:
+            # O: the velocities' exact Ornstein-Uhlenbeck step at the positions of the half step
+            t = t_end - span
+            odamp(mode, x, t, p, f)
+            noise(mode, x, t, p, G)
+            for kv in range(N_POS):
+                i = VEL[kv]
+                kd = f[i] * dt
+                if abs(kd) < 1e-12:
+                    a = 1.0 - kd
+                    c = 1.0
+                else:
+                    a = math.exp(-kd)
+                    c = math.sqrt(-math.expm1(-2.0 * kd) / (2.0 * kd))
+                acc = 0.0
+                for k in range(M):
+                    acc += G[i * M + k] * dw[k]
+                x[i] = a * x[i] + c * acc
+
     if SCHEME == 2:
         # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
         noise(mode, x, t_end, p, G)
@@ -721,6 +825,10 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
                 acc += G[i * M + k] * dw[k]
             x[i] += acc
         drift(mode, x, t_end, p, f)
+        for k in range(N_POS):
+            x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+    elif SCHEME == 4:
+        bforce(mode, x, t_end, p, f)
         for k in range(N_POS):
             x[VEL[k]] += 0.5 * dt * f[VEL[k]]
     return mode
@@ -819,6 +927,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     """
     s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
     sdt = math.sqrt(dt)
+    hdt = 0.5 * dt
     x = np.empty(N)
     ws = np.empty(WORK)  # event_step's work arrays in one (each array argument costs registers at the call)
     dw = np.empty(M)

@@ -55,6 +55,8 @@ class AutomatonScheme:
         additive = st is not None and _additive(st)
         if self.name in ("em", "splitting"):  # neither has the Milstein correction
             return {"strong": 1.0 if additive else 0.5, "weak": 1.0}
+        if self.name == "baoab":  # noise free of the velocities on velocities only: no Milstein term exists
+            return {"strong": 1.0, "weak": 2.0}
         return {"strong": 1.0, "weak": 1.0}
 
     def check(self, st) -> None:
@@ -64,7 +66,7 @@ class AutomatonScheme:
                 "the noise is not commutative (L^j G_k != L^k G_j): Milstein would need Levy areas; use "
                 "scheme='em' (strong order 0.5) or, for a mechanical system with noise on the velocities, 'splitting'"
             )
-        if self.name in ("splitting", "symplectic"):
+        if self.name in ("splitting", "symplectic", "baoab"):
             paired = {i for pair in st.pairs for i in pair}
             missing = [s for i, s in enumerate(st.states) if i not in paired]
             if missing:
@@ -72,6 +74,9 @@ class AutomatonScheme:
                     f"scheme {self.name!r} needs every state to be a position (d q/dt = a velocity state, no noise) "
                     f"or its velocity; {missing} are neither: use scheme='em' or 'milstein'"
                 )
+        if self.name == "baoab":
+            for k in range(len(st.modes)):
+                _auto_codegen.ou_parts(st, k)
 
 
 AUTOMATON_SCHEMES = {name: AutomatonScheme(name, code) for name, code in _auto_codegen.SCHEME_CODES.items()}
@@ -373,11 +378,13 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     automaton : HybridAutomaton
         States, modes (flow, noise: one column per independent white noise), transitions (guard, direction,
         symbolic reset, priority, target).
-    scheme : {'em', 'milstein', 'splitting', 'symplectic'}
+    scheme : {'em', 'milstein', 'splitting', 'symplectic', 'baoab'}
         Euler-Maruyama; Milstein (commutative noise); the mechanical splitting (kick, free flight of the
-        positions with exact crossing location, noise, kick); or the symplectic Milstein (the velocities' Milstein
+        positions with exact crossing location, noise, kick); the symplectic Milstein (the velocities' Milstein
         step, then the free flight of the positions at the new velocities, crossings located exactly: the
-        oscillator kernel's ``milstein``). The last two need every state to be a position (d q/dt = v, no noise)
+        oscillator kernel's ``milstein``); or BAOAB (kick by the force, half flight, the velocities' exact
+        Ornstein-Uhlenbeck step, half flight, kick: weak order 2, for velocity drifts F(q, t) - c(q, t) v and
+        noise free of the velocities). The last three need every state to be a position (d q/dt = v, no noise)
         or a velocity; they do not pump energy into lightly damped oscillators as the explicit em and milstein
         do (about dt omega**2 / c).
     dt, paths, t_end, t_burn : float, int, float, float

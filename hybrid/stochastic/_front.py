@@ -1,17 +1,21 @@
 """Oscillator ensembles through the automaton kernel: ``ImpactOscillator`` as a front end of one generated path.
 
-``simulate_ensemble`` with the scheme ``milstein`` builds ``model.to_automaton()`` and runs it on the kernel that
-:mod:`._auto_codegen` generates for every automaton, with that kernel's ``symplectic`` scheme: the velocity's
-Milstein step, then the free flight of the position at the new velocity with each wall crossing located exactly and
-the restitution law applied there. That is the oscillator kernel's ``milstein`` step for step, and chunk k draws the
-same normals in the same order (lanes of 8 paths), so the two kernels give the same paths up to rounding (the test
-compares histograms bin for bin). Each chunk's automaton statistics are converted into the rows of
-:class:`EnsembleStatistics`, so checkpoints, merging, confidence intervals and the result checks are shared.
+``simulate_ensemble`` with the schemes ``milstein`` (the default) and ``splitting`` builds ``model.to_automaton()``
+and runs it on the kernel that :mod:`._auto_codegen` generates for every automaton:
 
-The oscillator kernel stays for what the automaton kernel does not reproduce: ``splitting`` (its exact
-Ornstein-Uhlenbeck velocity step), ``em`` (it keeps the step's increment across an impact), ``naive``, a restitution
-law given as a Python callable (the automaton kernel needs a symbolic reset), the GPU, and the driven or stored
-paths of ``drive_paths`` / ``sample_paths``.
+* ``milstein`` with the automaton's ``symplectic`` scheme: the velocity's Milstein step, then the free flight of
+  the position at the new velocity with each wall crossing located exactly and the restitution law applied there;
+* ``splitting`` with the automaton's ``baoab`` scheme: kick by the force, half flight, the velocity's exact
+  Ornstein-Uhlenbeck step, half flight, kick.
+
+Each is the oscillator kernel's scheme step for step, and chunk k draws the same normals in the same order (lanes
+of 8 paths), so the two kernels give the same paths up to rounding (the tests compare histograms bin for bin).
+Each chunk's automaton statistics are converted into the rows of :class:`EnsembleStatistics`, so checkpoints,
+merging, confidence intervals and the result checks are shared.
+
+The oscillator kernel stays for what the automaton kernel does not reproduce: ``em`` (it keeps the step's
+increment across an impact), ``naive``, a restitution law given as a Python callable (the automaton kernel needs a
+symbolic reset), the GPU, and the driven or stored paths of ``drive_paths`` / ``sample_paths``.
 """
 
 from __future__ import annotations
@@ -35,17 +39,22 @@ _SUMMED = ("x2", "y2", "below")
 _JOINT = ("x", "y")  # the joint histogram's coordinates: neither summed nor histogrammed on their own
 
 
+AUTOMATON_SCHEME = {"milstein": "symplectic", "splitting": "baoab"}
+"""The automaton scheme that takes each oscillator scheme's steps (same draws, same order of operations)."""
+
+
 def reproduces(model, scheme) -> bool:
-    """True when the automaton kernel reproduces ``scheme`` on ``model`` (milstein, a law given as an expression).
+    """True when the automaton kernel reproduces ``scheme`` on ``model`` (milstein or splitting, with a law given
+    as an expression).
 
     Examples
     --------
     >>> from models import DuffingImpact
     >>> from hybrid.stochastic import SCHEMES
-    >>> reproduces(DuffingImpact(), SCHEMES["milstein"]), reproduces(DuffingImpact(), SCHEMES["splitting"])
+    >>> reproduces(DuffingImpact(), SCHEMES["splitting"]), reproduces(DuffingImpact(), SCHEMES["em"])
     (True, False)
     """
-    return (scheme.name == "milstein" and getattr(model.restitution, "callable", None) is None
+    return (scheme.name in AUTOMATON_SCHEME and getattr(model.restitution, "callable", None) is None
             and model.energy_expr is not None)
 
 
@@ -109,15 +118,16 @@ class AutomatonChunks:
         return ids, self.job.npaths[ids], hist, xyh, vh, cnt, sm
 
 
-def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple) -> tuple:
+def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple, scheme: str = "milstein") -> tuple:
     """Generate and compile the automaton kernel of ``model`` for the run ``settings``.
 
     ``h_scale``, ``v_scale`` and ``xy_scales`` (x_scale, y_scale) are the oscillator runner's bin scales, so that
     both kernels bin alike. Returns ``(AutomatonKernel, AutomatonChunks)``.
     """
     t0 = time.perf_counter()
-    automaton, observables, src, st = _generated(model)
-    name = f"vibro_auto_symplectic_{_auto_codegen.source_hash(src)}"
+    auto_scheme = AUTOMATON_SCHEME[scheme]
+    automaton, observables, src, st = _generated(model, auto_scheme)
+    name = f"vibro_auto_{auto_scheme}_{_auto_codegen.source_hash(src)}"
     s = settings
     n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
     npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
@@ -162,13 +172,13 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
 _GENERATED: dict = {}
 
 
-def _generated(model):
+def _generated(model, scheme: str = "symplectic"):
     """The lifted automaton, its observables, the kernel source and structure of ``model`` (memoised: the sympy
     work costs 40-90 ms, as much as a short run)."""
     law = sp.sympify(model.restitution.expression(sp.Abs(_Y)))
     # srepr keeps every float in full precision (str and the fingerprint keep 15 digits)
     declared = (model.g, model.h, tuple(model.f), sp.Matrix(model.intensity), model.epsilon, model.barrier_exprs)
-    key = (type(model).__name__, sp.srepr(declared), type(model.restitution).__name__, sp.srepr(law),
+    key = (scheme, type(model).__name__, sp.srepr(declared), type(model.restitution).__name__, sp.srepr(law),
            tuple(float.hex(float(a)) for a in sp.preorder_traversal(law) if isinstance(a, sp.Float)),
            tuple((k, float.hex(float(v))) for k, v in model.params.items()))
     if key not in _GENERATED:
@@ -181,7 +191,7 @@ def _generated(model):
         else:
             below = sp.Integer(1)
         observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
-        src, st = _auto_codegen.generate_source(automaton, "symplectic", observables, summed=_SUMMED,
+        src, st = _auto_codegen.generate_source(automaton, scheme, observables, summed=_SUMMED,
                                                 joint_only=_JOINT)
         if len(_GENERATED) > 256:
             _GENERATED.clear()

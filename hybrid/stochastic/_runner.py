@@ -684,8 +684,9 @@ def _choose_kernel(model, sch, kernel, gpu: bool) -> str:
         return "automaton"
     if kernel == "automaton":
         raise ParameterError(
-            f"kernel='automaton' runs the scheme 'milstein' with a restitution law given as an expression (as the "
-            f"automaton's 'symplectic' scheme); scheme {sch.name!r} with {model.restitution!r} runs on the oscillator "
+            f"kernel='automaton' runs the schemes 'milstein' and 'splitting' with a restitution law given as an "
+            f"expression (as the automaton's 'symplectic' and 'baoab'); scheme {sch.name!r} with "
+            f"{model.restitution!r} runs on the oscillator "
             "kernel: use kernel='auto', or simulate_automaton(model.to_automaton(), ...) for the automaton schemes")
     return "oscillator"
 
@@ -709,7 +710,7 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
     if settings["kernel"] == "automaton":
         probe = _Job.scales(model, settings)
         kern, job = _front.build(model, settings, probe["h_scale"], probe["v_scale"],
-                                 (probe["x_scale"], probe["y_scale"]))
+                                 (probe["x_scale"], probe["y_scale"]), sch.name)
         names = tuple(model.params)
     else:
         kern = _codegen.build_kernel(model, sch)

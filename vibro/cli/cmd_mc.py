@@ -37,8 +37,8 @@ def register(subparsers) -> None:
     )
     add_model_arguments(p)
     p.add_argument("--scheme", default="milstein", choices=SCHEMES + AUTOMATON_ONLY_SCHEMES,
-                   help="time-stepping scheme (symplectic: automaton models; for an oscillator model milstein is "
-                        "that scheme)")
+                   help="time-stepping scheme (symplectic and baoab: automaton models; for an oscillator model "
+                        "milstein and splitting are those schemes)")
     p.add_argument("--dt", type=float, default=1e-3, help="time step; cost ∝ 1/dt")
     p.add_argument("--paths", type=int, default=256,
                    help="number of paths; cost ∝ paths x t_end / dt: the defaults are 5.6e8 path-steps, ~30 s on 2 "
@@ -103,8 +103,10 @@ def run(args) -> int:
     if getattr(model, "is_forced", False) or args.phases:
         return _run_forced(args, model, started)
     if args.scheme in AUTOMATON_ONLY_SCHEMES:
+        same = {"symplectic": "milstein runs the same step (velocity first, then the exact free flight)",
+                "baoab": "splitting runs the same step (kick, half flight, exact OU step, half flight, kick)"}
         raise ParameterError(f"--scheme {args.scheme} is a scheme of automaton models; for {model.name!r} "
-                             "--scheme milstein runs the same step (velocity first, then the exact free flight)")
+                             f"--scheme {same[args.scheme]}")
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")

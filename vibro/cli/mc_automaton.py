@@ -36,8 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "automaton models",
         "--model also takes impact_pair, vibrating_table, or path/to/file.py:NAME where NAME is a HybridAutomaton, "
         "or a function or class returning one; --filter, --observable or --range also send an oscillator model "
-        "through the automaton engine (schemes em, milstein, splitting, symplectic; --param sets automaton and filter "
-        "parameters).")
+        "through the automaton engine (schemes em, milstein, splitting, symplectic, baoab; --param sets automaton "
+        "and filter parameters).")
     g.add_argument("--filter", default=None, choices=FILTERS,
                    help="drive the model by coloured noise: ou (Ornstein-Uhlenbeck, --param alpha=BANDWIDTH) or "
                         "bandpass (--param zeta=... --param omega_f=...); the output tends to the white noise of the "
@@ -221,14 +221,14 @@ def run(args, resolved) -> int:
                                  checkpoint=args.checkpoint, resume=args.resume,
                                  checkpoint_every=args.checkpoint_every)
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
-    if args.scheme not in ("splitting", "symplectic"):
+    if args.scheme not in ("splitting", "symplectic", "baoab"):
         try:
             from hybrid.stochastic import AUTOMATON_SCHEMES
 
             AUTOMATON_SCHEMES["splitting"].check(analyse(automaton))
             notes.append(f"scheme {args.scheme!r} is explicit in the drift and pumps energy into lightly damped "
                          "oscillations (a bias ~ stiffness x dt / damping); this model admits --scheme symplectic or "
-                         "splitting")
+                         "splitting (or baoab where its damping is linear)")
         except Exception:  # splitting does not apply: nothing better to suggest
             pass
     for text in dict.fromkeys(notes):

@@ -5,7 +5,7 @@
 
 SCHEMES = ("em", "milstein", "naive", "splitting")
 """Names of ``hybrid.stochastic.SCHEMES``."""
-AUTOMATON_ONLY_SCHEMES = ("symplectic",)
+AUTOMATON_ONLY_SCHEMES = ("baoab", "symplectic")
 """Names of ``hybrid.stochastic.AUTOMATON_SCHEMES`` that the oscillator kernels do not have."""
 DENSITY_METHODS = ("chain", "exact-two-impact", "jump", "paper")
 """Names of ``averaging.METHODS``."""
