@@ -740,7 +740,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
                                 acc += L[(i * M + jn) * M + k] * prod
                         xb[i] += 0.5 * acc
             # earliest crossing among the transitions leaving this mode
-            best = -1
+            best = np.int64(-1)  # not the literal -1: numba would compile grate, check and reset for it too
             best_s = 2.0
             for jj in range(COUNT[mode]):
                 j = FIRST[mode] + jj
