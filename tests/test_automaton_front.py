@@ -232,3 +232,39 @@ def test_zero_noise_impact_times_and_speeds_match_the_heyoka_orbit(scheme):
         ratios.append(err_t / dt)
     if scheme == "em":  # a clean first-order constant: the fitted slope is 1
         assert max(ratios) / min(ratios) < 1.02, ratios
+
+
+@pytest.mark.parametrize("scheme", ["symplectic", "baoab"])
+def test_ensemble_event_logs_match_the_heyoka_orbit_at_zero_noise(scheme):
+    # the ensemble kernel's own per-path log (simulate_automaton(events=K)), D = 0: every path is the orbit;
+    # measured worst time error 2.3 dt (symplectic) and 2.3 dt (baoab) at dt = 1e-3, 6 impacts
+    from hybrid.deterministic import simulate_orbit
+
+    automaton = DuffingImpact(restitution=Newton(0.9), a=1.0, b=0.2, c=0.02, D=0.0, delta=1.0).to_automaton()
+    orbit = simulate_orbit(automaton, x0=[0.0, 3.0], t_end=6.0, backend="heyoka")
+    times, speeds = orbit.impacts.t, np.abs(orbit.impacts.before[:, 1])
+    dt = 1e-3
+    ens = simulate_automaton(automaton, scheme, dt=dt, paths=3, t_end=6.0, x0=(0.0, 3.0), seed=1, events=8,
+                             chunk_paths=2, histograms={"H": None}, check_dt=False)
+    assert ens.event_log.shape == (3, 8, 3) and list(ens.event_totals) == [6, 6, 6]
+    assert np.all(np.isnan(ens.event_log[:, 6:, :]))  # fewer firings than rows: NaN, not zeros
+    for path in range(3):
+        log = ens.event_log[path, :6]
+        assert [ens.transitions[int(j)] for j in log[:, 1]] == list(orbit.impacts.transition)
+        assert np.max(np.abs(log[:, 0] - times)) < 5 * dt and np.max(np.abs(log[:, 2] - speeds)) < 5 * dt
+    first_left = ens.first_event_times("left")
+    assert np.allclose(first_left, ens.event_log[:, 1, 0]) and abs(first_left[0] - times[1]) < 5 * dt
+    table = ens.events_to_pandas()
+    assert len(table) == 18 and set(table.transition) == {"left", "right"}
+
+
+def test_event_log_requests_are_checked():
+    a = DuffingImpact().to_automaton()
+    kw = dict(dt=0.01, paths=8, t_end=1.0, x0=(0.0, 0.0), seed=1, histograms={"H": None})
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ParameterError, match="events="):
+            simulate_automaton(a, "symplectic", events=bad, **kw)
+    with pytest.raises(ParameterError, match="GiB of event log"):
+        simulate_automaton(a, "symplectic", events=10**9, **kw)
+    with pytest.raises(ParameterError, match="no event log"):
+        simulate_automaton(a, "symplectic", **kw).first_event_times()

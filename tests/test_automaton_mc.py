@@ -131,10 +131,14 @@ def test_equilibrium_stop_as_an_automaton_agrees_with_the_oscillator_kernel():
 
 def test_same_seed_and_chunks_give_the_same_numbers_on_any_thread_count():
     kw = dict(dt=0.02, paths=12, t_end=40.0, t_burn=0.0, x0=(0.5, 0.0), seed=5, histograms={"H": (0.0, 4.0, 20)},
-              chunk_paths=4)
+              chunk_paths=4, events=5)
     a = simulate_automaton(equilibrium_stop_automaton(), "splitting", threads=1, **kw)
     b = simulate_automaton(equilibrium_stop_automaton(), "splitting", threads=3, **kw)
     assert np.array_equal(a.counts["H"], b.counts["H"]) and np.array_equal(a.chunk_sums, b.chunk_sums)
+    assert np.array_equal(a.event_log, b.event_log, equal_nan=True) and np.array_equal(a.event_totals, b.event_totals)
+    # t_burn = 0: every firing counted after burn-in is one of the paths' own (the log's totals)
+    assert a.event_totals.sum() == a.events.sum() > 12 * 5
+    assert np.all(np.isfinite(a.event_log[:, :, 0])) and np.all(np.diff(a.event_log[:, :, 0], axis=1) > 0)
 
 
 def test_checkpoint_resume_and_dask_give_the_thread_numbers_bitwise(tmp_path):
@@ -142,7 +146,7 @@ def test_checkpoint_resume_and_dask_give_the_thread_numbers_bitwise(tmp_path):
     from hybrid.stochastic import _auto_exec
 
     kw = dict(dt=0.02, paths=24, t_end=60.0, t_burn=5.0, x0=(0.5, 0.0), seed=8, histograms={"H": (0.0, 4.0, 20)},
-              chunk_paths=3)
+              chunk_paths=3, events=3)
     whole = simulate_automaton(equilibrium_stop_automaton(), "splitting", **kw)
     ck = tmp_path / "ck"
     # interrupted after 5 of 8 chunks: the accept callback raises as a Ctrl-C would
@@ -173,6 +177,8 @@ def test_checkpoint_resume_and_dask_give_the_thread_numbers_bitwise(tmp_path):
         assert np.array_equal(other.counts["H"], whole.counts["H"]) and np.array_equal(other.chunk_sums,
                                                                                      whole.chunk_sums)
         assert np.array_equal(other.events, whole.events)
+        assert np.array_equal(other.event_log, whole.event_log) and np.array_equal(other.event_totals,
+                                                                                   whole.event_totals)
     with pytest.raises(CheckpointError, match="another run"):
         simulate_automaton(equilibrium_stop_automaton(), "splitting", checkpoint=ck, resume=True,
                            params={"r": 0.9}, **kw)

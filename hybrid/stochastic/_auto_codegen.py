@@ -772,7 +772,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
                     fw[FW_FBAD] = speed
                 iw[5] += 1
             k_log = iw[IW_NLOG]
-            if k_log < elog.shape[0]:  # the event log of driven paths (empty in ensembles)
+            if k_log < elog.shape[0]:  # the path's event log (empty unless asked for)
                 elog[k_log, 0] = t + best_s * tau
                 elog[k_log, 1] = best
                 elog[k_log, 2] = speed
@@ -905,7 +905,7 @@ def outside(mode, x, t, p):
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
               v_scale, v_bins, vhist, counts, sums, events, gstat, track, n_phase, phase_steps,
-              phist, psums, pcount, vsum, fbad):
+              phist, psums, pcount, vsum, fbad, elogs, nlogs):
     """Paths of one chunk; histograms (with underflow bin 0 and overflow bin last), sums and event counts.
 
     Paths run in groups of LANES interleaved lanes (their independent dependency chains overlap in the CPU), each
@@ -923,7 +923,8 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     last bin, and vsum[j] the sum of those speeds; fbad[0]: the speed at the first firing whose check failed.
     gstat[j], only when ``track`` (the step rule's pilot, which runs every step through ``event_step``), every
     step with burn-in: [sum of (g1 - g0)**2 over the steps tried, their number, min g0, max g0], how far one
-    step moves a guard against the span of the guard over the paths.
+    step moves a guard against the span of the guard over the paths. elogs[i] (K rows): time, transition and speed
+    of the first K events of the chunk's path i from t0 (burn-in included; K may be 0), nlogs[i]: all its events.
     """
     s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
     sdt = math.sqrt(dt)
@@ -937,7 +938,6 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     PL = np.empty(LANES, dtype=np.int64)  # lanes of this step that go through event_step, and their increments
     DWL = np.empty((LANES, M))
     JL = np.empty((LANES, 2))  # the lanes' coordinates in the joint histogram
-    elog = np.empty((0, 3))  # ensembles keep no event log
     iw = np.zeros(IW, dtype=np.int64)
     fw = np.zeros(FW)
     for j in range(N_TRANS):
@@ -980,8 +980,10 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                 _l = PL[_q]
 {to_array_s}
 {load_dw}
+                iw[IW_NLOG] = nlogs[_g + _l]  # the path's own event count: its log's next row
                 mode = event_step(ML[_l], x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
-                                  elog)
+                                  elogs[_g + _l])
+                nlogs[_g + _l] = iw[IW_NLOG]
                 ML[_l] = mode
 {reload}
                 # the admissible set at a sample; a fast step settles it itself (its guards are tested inside)

@@ -21,10 +21,11 @@ from hybrid.io import atomic_write
 from . import _codegen, _rng, _shared_exec
 
 CHECKPOINT_FILE = "automaton_checkpoint.npz"
-CHECKPOINT_FORMAT = 2
-"""2: speed sums, first failed check, no sums of squares (never read)."""
+CHECKPOINT_FORMAT = 3
+"""2: speed sums, first failed check, no sums of squares (never read); 3: the paths' event logs."""
 
-PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "events", "gstat", "phist", "psums", "pcount")
+PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "events", "gstat", "phist", "psums", "pcount", "vsum",
+             "fbad", "elog", "nlog")
 """The kernel's per-chunk outputs, in its argument order."""
 
 
@@ -62,7 +63,7 @@ class AutomatonJob:
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
                          a["v_bins"], out["vhist"], out["counts"], out["sums"], out["events"],
                          out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"],
-                         out["vsum"], out["fbad"])
+                         out["vsum"], out["fbad"], out["elog"], out["nlog"])
         return out
 
 

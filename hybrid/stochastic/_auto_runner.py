@@ -135,6 +135,15 @@ class AutomatonEnsemble:
         (underflow first, overflow last), when ``phases`` was given.
     phase_sums, phase_samples : (chunks, phases, observables) and (chunks, phases) arrays, or None
         Per-chunk sums and sample counts at each phase (batch means).
+    speed_sums : array
+        Sum of the speeds at the firings of each transition (after burn-in).
+    first_bad_speed : float
+        Speed at the first firing whose transition check failed (0 if none did).
+    event_log : (paths, K, 3) array or None
+        With ``events=K``: time, transition index and speed of each path's first K firings from t = 0, burn-in
+        included (NaN rows where it had fewer).
+    event_totals : (paths,) int array or None
+        Each path's number of firings from t = 0 (beyond K too).
     """
 
     names: tuple
@@ -156,6 +165,42 @@ class AutomatonEnsemble:
     phase_samples: np.ndarray | None = None
     speed_sums: np.ndarray | None = None
     first_bad_speed: float = 0.0
+    event_log: np.ndarray | None = None
+    event_totals: np.ndarray | None = None
+
+    def _log(self) -> np.ndarray:
+        if self.event_log is None:
+            raise ParameterError("no event log was kept: pass events=K to simulate_automaton")
+        return self.event_log
+
+    def first_event_times(self, transition: str | None = None) -> np.ndarray:
+        """Per path, the time of its first firing (of ``transition``, or of any): NaN where none was kept.
+
+        With ``x0`` inside the admissible set this is the first-passage time to the guard (a reliability
+        quantity); a path whose first ``events`` firings are all of other transitions also gives NaN.
+
+        Examples
+        --------
+        >>> ens = simulate_automaton(..., events=1)      # doctest: +SKIP
+        >>> np.nanmean(ens.first_event_times("right"))   # doctest: +SKIP
+        """
+        log = self._log()
+        hit = np.isfinite(log[:, :, 0])
+        if transition is not None:
+            hit &= log[:, :, 1] == self.transitions.index(transition)
+        first = np.argmax(hit, axis=1)
+        times = log[np.arange(len(log)), first, 0]
+        return np.where(hit.any(axis=1), times, np.nan)
+
+    def events_to_pandas(self):
+        """The kept firings in long form: path, k (0 = first), t, transition (name), speed."""
+        import pandas as pd
+
+        log = self._log()
+        path, k = np.nonzero(np.isfinite(log[:, :, 0]))
+        return pd.DataFrame({"path": path, "k": k, "t": log[path, k, 0],
+                             "transition": np.asarray(self.transitions, dtype=object)[log[path, k, 1].astype(int)],
+                             "speed": log[path, k, 2]})
 
     def mean(self, name: str) -> Estimate:
         """Time-and-ensemble mean of an observable with a 95 % batch-means interval over chunks.
@@ -255,7 +300,7 @@ class AutomatonEnsemble:
     def merge(self, other: AutomatonEnsemble) -> AutomatonEnsemble:
         """The union of two ensembles of the same automaton, scheme, dt and histogram settings."""
         keys = ("automaton", "scheme", "dt", "t_end", "t_burn", "stride", "histograms", "joint", "params", "phases",
-                "period")
+                "period", "events")
         if any(self.settings.get(k) != other.settings.get(k) for k in keys):
             raise ParameterError("only ensembles of the same automaton, scheme, dt and histograms can be merged")
         joint = None
@@ -274,6 +319,8 @@ class AutomatonEnsemble:
             None if self.phase_samples is None else np.concatenate([self.phase_samples, other.phase_samples]),
             None if self.speed_sums is None else self.speed_sums + other.speed_sums,
             self.first_bad_speed or other.first_bad_speed,
+            None if self.event_log is None else np.concatenate([self.event_log, other.event_log]),
+            None if self.event_totals is None else np.concatenate([self.event_totals, other.event_totals]),
         )
 
     def to_pandas(self, name: str):
@@ -370,7 +417,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                        threads: int | None = None, convention: str = "stratonovich",
                        max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True, phases: int = 0,
                        period: float | None = None, scheduler=None, checkpoint=None, resume: bool = False,
-                       checkpoint_every: int = 4) -> AutomatonEnsemble:
+                       checkpoint_every: int = 4, events: int = 0) -> AutomatonEnsemble:
     """Monte Carlo ensemble of a hybrid automaton with noise, crossings located inside the step.
 
     Parameters
@@ -426,6 +473,11 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Apply the step rule of :func:`guard_step_rule`: a pilot (a copy of chunk 0's stream, 2 % of the steps,
         at least 5000) refuses a ``dt`` with which one step moves a guard across half of the range that guard
         spans along the paths, and warns above a tenth. ``settings['step_rule']`` keeps the figures.
+    events : int
+        Keep the first ``events`` firings of every path from t = 0 (burn-in included): time, transition and
+        |rate of change of the guard| (the impact speed), as :attr:`AutomatonEnsemble.event_log`, with each path's
+        number of firings in :attr:`AutomatonEnsemble.event_totals`; first-passage and inter-impact times come from
+        there. Costs paths x events x 24 bytes (refused above :data:`MAX_EVENT_LOG_BYTES`).
     phases, period : int, float
         Poincaré sections of a periodically forced automaton: with ``phases=N`` the observables are also
         histogrammed at the times k T / N + i T (k = 0 .. N - 1, after burn-in), besides the time average. So that
@@ -493,6 +545,13 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
             "reduce paths or t_end, raise dt, or pass a larger max_path_steps"
         )
     check_chunk_count(paths, chunk_paths)  # before compiling: each chunk spawns its own stream
+    if isinstance(events, bool) or not isinstance(events, (int, np.integer)) or events < 0:
+        raise ParameterError(f"events={events!r} must be an integer >= 0 (the firings kept per path; 0: none)")
+    n_log = int(events)  # (the name events is taken below by the firing counts)
+    if 24.0 * paths * n_log > MAX_EVENT_LOG_BYTES:
+        raise ParameterError(
+            f"events={n_log} for {paths} paths keeps {24.0 * paths * n_log / 2**30:.3g} GiB of event log, above "
+            f"{MAX_EVENT_LOG_BYTES / 2**30:.3g} GiB; keep fewer events per path or run fewer paths")
     values = automaton.resolve_parameters(params)
     n = len(automaton.states)
     try:
@@ -580,6 +639,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((n_ph, n_obs, width), i64, 0),
         "psums": ((n_ph, n_obs), float, 0.0), "pcount": ((n_ph,), i64, 0),
         "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
+        "elog": ((chunk_paths, n_log, 3), float, np.nan), "nlog": ((chunk_paths,), i64, 0),
     }
     args = dict(n_burn=n_burn, n_samp=n_samp, stride=stride, dt=dt, x0=x0, mode0=mode_names.index(mode0),
                 p=np.array([values[k] for k in st.params], dtype=float),
@@ -604,7 +664,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         "source": _auto_codegen.source_hash(src), "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end,
         "t_burn": t_burn, "stride": stride, "seed": seed, "chunk_paths": chunk_paths, "x0": x0.tolist(),
         "mode0": mode0, "params": {k: float(v) for k, v in values.items()}, "histograms": histograms,
-        "joint": joint, "speed_range": speed_range, "phases": phases, "period": period, "convention": convention})
+        "joint": joint, "speed_range": speed_range, "phases": phases, "period": period, "convention": convention,
+        "events": n_log})
     done = np.zeros(n_chunks, dtype=bool)
     if ckdir is not None and resume:
         loaded = _auto_exec.load(ckdir, run_id, rows)
@@ -644,7 +705,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end, "t_burn": t_burn, "stride": stride,
                 "seed": seed, "chunk_paths": chunk_paths, "histograms": dict(histograms), "joint": joint,
                 "params": values, "convention": convention, "orders": sch.orders(st), "step_rule": step_rule,
-                "phases": phases, "period": period}
+                "phases": phases, "period": period, "events": n_log}
     if phases:
         settings.update(dt_requested=dt_requested, phase_steps=phase_steps)
     ens = AutomatonEnsemble(
@@ -654,6 +715,9 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         sampled_time=float(paths) * n_samp * stride * dt, speed_sums=rows["vsum"].sum(axis=0)[:n_tr],
         first_bad_speed=float(next((r[0] for r, c in zip(rows["fbad"], counts[:, 5]) if c), 0.0)),
     )
+    if n_log:
+        ens.event_log = rows["elog"].reshape(n_chunks * chunk_paths, n_log, 3)[:paths]
+        ens.event_totals = rows["nlog"].reshape(-1)[:paths].copy()
     if phases:
         psum_all = phist.sum(axis=0)
         ens.phase_counts = {nm: psum_all[:, i, : bins[i] + 2].copy() for i, nm in enumerate(names)
@@ -664,6 +728,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     return ens
 
 
+MAX_EVENT_LOG_BYTES = 4 * 2**30
+"""Largest event log :func:`simulate_automaton` keeps (``events`` x paths x 24 bytes)."""
 STEP_REFUSE = 0.5
 """Refuse a step that moves a guard (4 x its rms change per step) by more than this share of the guard's span."""
 STEP_WARN = 0.1

@@ -144,6 +144,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
         "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((1, n_obs, s["bins"] + 2), i64, 0),
         "psums": ((1, n_obs), float, 0.0), "pcount": ((1,), i64, 0),
         "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
+        "elog": ((cp, 0, 3), float, 0.0), "nlog": ((cp,), i64, 0),  # no event log in oscillator ensembles
     }
     names = list(observables)
     ones = np.ones(n_obs)
