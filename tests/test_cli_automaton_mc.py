@@ -87,6 +87,21 @@ def test_impact_pair_from_the_command_line_meets_its_gibbs_mean_energy(tmp, caps
     assert list(tr["transition"]) == ["hit_right", "hit_left"]
 
 
+def test_event_logs_from_the_command_line(tmp, capsys):
+    out, summary = tmp / "h.csv", tmp / "s.json"
+    rc = _run(["mc", "--model", "impact_pair", "--scheme", "splitting", "--dt", "0.01", "--paths", "16",
+               "--t-end", "40", "--t-burn", "0", "--seed", "4", "--events", "3", "--out", out,
+               "--summary-json", summary])
+    assert rc == 0, capsys.readouterr().err
+    ev = pd.read_csv(tmp / "h_events.csv")
+    assert list(ev.columns) == ["path", "k", "t", "transition", "speed"]
+    assert set(ev["path"]) == set(range(16)) and ev["k"].max() == 2 and (ev["t"] > 0).all()
+    first = json.loads(summary.read_text())["results"]["first_event_time"]
+    for name, rec in first.items():  # the mean over the paths whose kept firings include the transition
+        firsts = ev[ev.transition == name].groupby("path")["t"].min()
+        assert rec["paths"] == len(firsts) and rec["mean"] == pytest.approx(firsts.mean(), rel=1e-12)
+
+
 def test_a_user_oscillator_with_an_ou_filter_meets_the_closed_form_response(tmp, capsys):
     out, summary = tmp / "h.csv", tmp / "s.json"
     alpha, dt = 2.0, 0.01
@@ -147,6 +162,7 @@ BAD = [
     (["--model", "{tmp}/user.py:ou_velocity"], "nothing to histogram"),
     (["--model", "impact_pair", "--range", "z=0:1:10000000", "--max-memory-gb", "0.01"], "GiB"),
     (["--model", "vibrating_table", "--phases", "4"], "--phases needs a forced oscillator model"),
+    (["--model", "impact_pair", "--events", "-1"], "events=-1 must be an integer >= 0"),
 ]
 
 

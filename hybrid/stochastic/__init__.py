@@ -62,5 +62,6 @@ __all__ = [
 
 # Monte Carlo of any hybrid automaton with noise (n states, modes, guards, resets)
 from ._auto_runner import AUTOMATON_SCHEMES, AutomatonEnsemble, drive_automaton, simulate_automaton  # noqa: E402
+from ._front import AUTOMATON_SCHEME_OF  # noqa: E402
 
-__all__ += ["AUTOMATON_SCHEMES", "AutomatonEnsemble", "drive_automaton", "simulate_automaton"]
+__all__ += ["AUTOMATON_SCHEMES", "AUTOMATON_SCHEME_OF", "AutomatonEnsemble", "drive_automaton", "simulate_automaton"]

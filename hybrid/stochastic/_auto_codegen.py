@@ -158,7 +158,9 @@ class _Names:
 
     def hoist(self, e):
         """``e`` (in code names) with each largest sub-expression of the loop invariants replaced by a name
-        ``_hK`` bound in :meth:`hoisted_lines`; in sums and products the invariant terms or factors are grouped."""
+        ``_invK`` bound in :meth:`hoisted_lines`; in sums and products the invariant terms or factors are grouped.
+        Nothing inside a Piecewise that depends on the state is bound: its branches are evaluated only when taken
+        (a parameter-only division in a branch not taken must not run before the loops)."""
         if e.is_Atom:
             return e
         if isinstance(e, sp.Expr) and e.free_symbols <= self.invariant:
@@ -169,11 +171,13 @@ class _Names:
             if len(fixed) > 1 or (fixed and not fixed[0].is_Atom):
                 fixed = [self._bind(e.func(*fixed))]
             return e.func(*fixed, *rest)
+        if isinstance(e, sp.Piecewise):
+            return e
         return e.func(*[self.hoist(a) for a in e.args])
 
     def _bind(self, e):
         if e not in self.hoisted:
-            self.hoisted[e] = sp.Symbol(f"_h{len(self.hoisted)}")
+            self.hoisted[e] = sp.Symbol(f"_inv{len(self.hoisted)}")  # a prefix no other generated name uses
         return self.hoisted[e]
 
     def hoisted_lines(self) -> list[str]:
@@ -441,7 +445,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         fast.append(f"{'if' if k == 0 else 'elif'} mode == {k}:")
         fast.append(textwrap.indent(_fast_step(st, names, k, scheme), "    "))
     # the fast step's guard tests settle the admissible-set check of a sample, unless the splitting's noise and
-    # kick after the flight move a guard that depends on velocities
+    # kick, or BAOAB's closing kick, after the flight move a guard that depends on velocities
     velocities = {real_symbol(st.states[v]) for _, v in st.pairs}
     fast_checks_set = scheme not in ("splitting", "baoab") or all(
         not (sp.sympify(tr.guard).free_symbols & velocities) for tr in st.transitions)
@@ -457,7 +461,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
                   " " * 4),
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
         init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
-        to_array_s=ind("\n".join(f"x[{i}] = _L{i}[_l]" for i in range(n)), " " * 16),
+        lane_to_x=ind("\n".join(f"x[{i}] = _L{i}[_l]" for i in range(n)), " " * 16),
         phase_block=ind(_PHASES.format(pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 8))
                         if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
                         " " * 12),
@@ -475,7 +479,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         fast_checks_set=fast_checks_set,
         scheme_code=SCHEME_CODES[scheme], legs=2 if scheme == "baoab" else 1,
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
-        n_modes=len(st.modes), n_trans=len(st.transitions), max_events=MAX_EVENTS,
+        n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
         first=tuple(first) + (0,), count=tuple(count) + (0,), targets=tuple(targets) + (0,),
         directions=tuple(directions) + (0,), self_loops=tuple(self_loops) + (0,),
@@ -677,6 +681,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
     G = ws[6 * N:6 * N + N * M]
     L = ws[6 * N + N * M:WORK]
     free_flight = SCHEME >= 2  # a constant of the module: the other schemes' code is never compiled
+    t_step = t
     if SCHEME == 2:
         # kick: velocities by half the drift
         drift(mode, x, t, p, f)
@@ -709,6 +714,8 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
     n_ev = 0
     span = dt / LEGS  # BAOAB flies in two halves with its OU step between them
     for leg in range(LEGS):
+        if n_ev >= MAX_EVENTS:  # the first leg overflowed: counted once, the state kept
+            break
         frac = 1.0  # share of the leg still to run
         while True:
             tau = frac * span
@@ -799,7 +806,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
                 break
         if SCHEME == 4 and leg == 0:
             # O: the velocities' exact Ornstein-Uhlenbeck step at the positions of the half step
-            t = t_end - span
+            t = t_step + span  # as the fast step's t + hdt, to the bit
             odamp(mode, x, t, p, f)
             noise(mode, x, t, p, G)
             for kv in range(N_POS):
@@ -978,7 +985,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
             # the draws, and every number, is that of a call inside the loop)
             for _q in range(npend):
                 _l = PL[_q]
-{to_array_s}
+{lane_to_x}
 {load_dw}
                 iw[IW_NLOG] = nlogs[_g + _l]  # the path's own event count: its log's next row
                 mode = event_step(ML[_l], x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
@@ -997,7 +1004,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {load}
 {observe}
                 _nsamp += 1
-                if not FAST_CHECKS_SET:  # the splitting's noise and kick after the flight can move a guard
+                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard
 {to_array}
                     if outside(mode, x, _t1, p):
                         counts[2] += 1

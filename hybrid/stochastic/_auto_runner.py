@@ -187,6 +187,8 @@ class AutomatonEnsemble:
         log = self._log()
         hit = np.isfinite(log[:, :, 0])
         if transition is not None:
+            if transition not in self.transitions:
+                raise ParameterError(f"no transition {transition!r}; the automaton's are {list(self.transitions)}")
             hit &= log[:, :, 1] == self.transitions.index(transition)
         first = np.argmax(hit, axis=1)
         times = log[np.arange(len(log)), first, 0]
@@ -716,7 +718,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         first_bad_speed=float(next((r[0] for r, c in zip(rows["fbad"], counts[:, 5]) if c), 0.0)),
     )
     if n_log:
-        ens.event_log = rows["elog"].reshape(n_chunks * chunk_paths, n_log, 3)[:paths]
+        ens.event_log = rows["elog"].reshape(n_chunks * chunk_paths, n_log, 3)[:paths].copy()
         ens.event_totals = rows["nlog"].reshape(-1)[:paths].copy()
     if phases:
         psum_all = phist.sum(axis=0)

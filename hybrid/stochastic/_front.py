@@ -27,6 +27,7 @@ import numpy as np
 import sympy as sp
 
 from hybrid.automaton import real_symbol
+from hybrid.errors import ModelError
 
 from . import _auto_codegen, _auto_exec, _rng
 from ._statistics import COUNTS, SUMS
@@ -39,8 +40,14 @@ _SUMMED = ("x2", "y2", "below")
 _JOINT = ("x", "y")  # the joint histogram's coordinates: neither summed nor histogrammed on their own
 
 
-AUTOMATON_SCHEME = {"milstein": "symplectic", "splitting": "baoab"}
-"""The automaton scheme that takes each oscillator scheme's steps (same draws, same order of operations)."""
+AUTOMATON_SCHEME_OF = {"milstein": "symplectic", "splitting": "baoab"}
+"""The automaton scheme that takes each oscillator scheme's steps (same draws, same order of operations).
+
+Examples
+--------
+>>> AUTOMATON_SCHEME_OF["splitting"]
+'baoab'
+"""
 
 
 def reproduces(model, scheme) -> bool:
@@ -54,8 +61,14 @@ def reproduces(model, scheme) -> bool:
     >>> reproduces(DuffingImpact(), SCHEMES["splitting"]), reproduces(DuffingImpact(), SCHEMES["em"])
     (True, False)
     """
-    return (scheme.name in AUTOMATON_SCHEME and getattr(model.restitution, "callable", None) is None
-            and model.energy_expr is not None)
+    if not (scheme.name in AUTOMATON_SCHEME_OF and getattr(model.restitution, "callable", None) is None
+            and model.energy_expr is not None):
+        return False
+    try:  # a model the scheme refuses stays on the oscillator path, which says why in the scheme's own words
+        scheme.check(model)
+    except ModelError:
+        return False
+    return True
 
 
 class AutomatonKernel:
@@ -125,7 +138,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     both kernels bin alike. Returns ``(AutomatonKernel, AutomatonChunks)``.
     """
     t0 = time.perf_counter()
-    auto_scheme = AUTOMATON_SCHEME[scheme]
+    auto_scheme = AUTOMATON_SCHEME_OF[scheme]
     automaton, observables, src, st = _generated(model, auto_scheme)
     name = f"vibro_auto_{auto_scheme}_{_auto_codegen.source_hash(src)}"
     s = settings

@@ -78,7 +78,8 @@ class MonteCarloAlgorithm:
     kernel : {"auto", "automaton", "oscillator"}
         Which generated CPU kernel runs the scheme: the one generated from ``model.to_automaton()`` for every
         automaton, or the oscillator's own. ``auto`` takes the automaton kernel wherever it reproduces the scheme
-        (``milstein`` with a restitution law given as an expression: the same paths up to rounding).
+        (``milstein`` and ``splitting`` with a restitution law given as an expression, as the automaton's
+        ``symplectic`` and ``baoab``: the same paths up to rounding).
 
     Examples
     --------

@@ -546,9 +546,10 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
     threads_per_block, launch_steps : int
         ``cuda`` only: block size and steps per kernel launch; neither changes any number.
     kernel : {"auto", "automaton", "oscillator"}
-        The CPU kernel: ``auto`` (default) runs ``milstein`` with a law given as an expression on the kernel
-        generated from ``model.to_automaton()`` (its ``symplectic`` scheme: the same paths up to rounding), every
-        other case on the oscillator's own kernel; ``settings['kernel']`` says which ran.
+        The CPU kernel: ``auto`` (default) runs ``milstein`` and ``splitting`` with a law given as an expression
+        on the kernel generated from ``model.to_automaton()`` (its ``symplectic`` and ``baoab`` schemes: the same
+        paths up to rounding), every other case on the oscillator's own kernel; ``settings['kernel']`` says which
+        ran.
     check_dt : bool
         Apply :func:`check_step` (refuse or warn on coarse steps).
     max_path_steps, max_memory : float

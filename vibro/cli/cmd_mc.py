@@ -37,8 +37,8 @@ def register(subparsers) -> None:
     )
     add_model_arguments(p)
     p.add_argument("--scheme", default="milstein", choices=SCHEMES + AUTOMATON_ONLY_SCHEMES,
-                   help="time-stepping scheme (symplectic and baoab: automaton models; for an oscillator model "
-                        "milstein and splitting are those schemes)")
+                   help="time-stepping scheme (symplectic and baoab: automaton models; for an oscillator model, "
+                        "forced or not, milstein and splitting are those schemes)")
     p.add_argument("--dt", type=float, default=1e-3, help="time step; cost ∝ 1/dt")
     p.add_argument("--paths", type=int, default=256,
                    help="number of paths; cost ∝ paths x t_end / dt: the defaults are 5.6e8 path-steps, ~30 s on 2 "
@@ -171,7 +171,13 @@ def _run_forced(args, model, started) -> int:
     import pandas as pd
 
     from hybrid.errors import ModelError
-    from hybrid.stochastic import AUTOMATON_SCHEMES, atomic_write_text, default_chunk_paths, simulate_automaton
+    from hybrid.stochastic import (
+        AUTOMATON_SCHEME_OF,
+        AUTOMATON_SCHEMES,
+        atomic_write_text,
+        default_chunk_paths,
+        simulate_automaton,
+    )
     from vibro.provenance import record, write_sidecar
 
     period = model.forcing_period
@@ -185,9 +191,12 @@ def _run_forced(args, model, started) -> int:
         target = _phases_path(args)
         if not target.resolve().parent.is_dir() or target.is_dir():
             raise ParameterError(f"--phases-out {str(target)!r}: the directory does not exist or it is a directory")
-    if args.scheme not in AUTOMATON_SCHEMES:
+    # an oscillator's scheme names mean the same forced or not: milstein and splitting are the automaton's
+    # symplectic and baoab (the explicit automaton milstein would pump energy); em stays em
+    scheme = AUTOMATON_SCHEME_OF.get(args.scheme, args.scheme)
+    if scheme not in AUTOMATON_SCHEMES:
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
-                             f"{sorted(AUTOMATON_SCHEMES)}")
+                             f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")
     for flag, value in (("--checkpoint", args.checkpoint), ("--scheduler", args.scheduler if args.scheduler
                                                                     not in (None, "threads") else None)):
         if value is not None:
@@ -210,7 +219,7 @@ def _run_forced(args, model, started) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ens = simulate_automaton(
-            automaton, args.scheme, dt=args.dt, paths=args.paths, t_end=args.t_end, t_burn=args.t_burn,
+            automaton, scheme, dt=args.dt, paths=args.paths, t_end=args.t_end, t_burn=args.t_burn,
             x0=(0.0, 0.0), seed=args.seed, observables={"H": model.energy_expr, "x": "x", "y": "y"},
             histograms=histograms, joint=joint, stride=args.stride,
             chunk_paths=args.chunk_paths or default_chunk_paths(args.paths), max_path_steps=args.max_path_steps,
@@ -244,6 +253,7 @@ def _run_forced(args, model, started) -> int:
         results["phase_mean_x"] = [{"t_phase": float(tk), "value": ens.phase_mean("x", k).value,
                                     "ci": ens.phase_mean("x", k).ci} for k, tk in enumerate(ens.phase_times())]
     settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "engine": "simulate_automaton",
+                "scheme": args.scheme, "automaton_scheme": scheme,
                 "forcing": str(model.forcing), "scheduler": "threads",
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
     rec = record("mc", model=model, settings=settings, results=results, started=started)
@@ -253,8 +263,8 @@ def _run_forced(args, model, started) -> int:
     steps = ens.settings["paths"] * ens.settings["t_end"] / ens.settings["dt"]
     dt_note = (f" (lowered from {ens.settings['dt_requested']:g} so that T = {args.phases} x "
                f"{ens.settings['phase_steps']} steps)" if args.phases else "")
-    print(f"vibro mc: {args.scheme} dt={ens.settings['dt']:.10g}{dt_note} paths={args.paths} seed={args.seed} "
-          f"path-steps={steps:.4g}  (forced model: automaton kernel)")
+    print(f"vibro mc: {args.scheme} ({scheme}) dt={ens.settings['dt']:.10g}{dt_note} paths={args.paths} "
+          f"seed={args.seed} path-steps={steps:.4g}  (forced model: automaton kernel)")
     print(f"  forcing         F = {model.forcing}" + (f", period {period:.10g}" if period else ""))
     print(f"  throughput      {steps / max(ens.wall_time, 1e-9) / 1e6:.1f} M path-steps/s  (wall "
           f"{ens.wall_time:.2f} s)")

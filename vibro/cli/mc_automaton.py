@@ -10,7 +10,8 @@ oscillator path and this one change independently. An automaton runs through
 
 Files: ``--out`` holds the histogram of the energy ``H`` when the model declares one (``H_lo,H_hi,count,density``,
 as for oscillators; otherwise of the first observable), each other observable NAME goes to ``STEM_NAME.csv``
-(``NAME_lo,NAME_hi,count,density``), firings and rates per transition to ``STEM_transitions.csv``; the first and
+(``NAME_lo,NAME_hi,count,density``), firings and rates per transition to ``STEM_transitions.csv``, and with
+``--events K`` each path's first K firings to ``STEM_events.csv`` (``path,k,t,transition,speed``); the first and
 last histogram rows count the samples below and above the range. Every file is written atomically.
 """
 
@@ -50,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "0:h_max:bins; a declared observable is histogrammed when given a range)")
     g.add_argument("--x0", type=float, nargs="+", default=None, metavar="V",
                    help="initial state of every path, one value per state (default: zeros)")
+    g.add_argument("--events", type=int, default=0, metavar="K",
+                   help="keep each path's first K firings from t = 0 (time, transition, speed) in STEM_events.csv; "
+                        "the summary gives each transition's mean first-passage time (default 0: none)")
 
 
 def automaton_from_args(args):
@@ -64,7 +68,7 @@ def automaton_from_args(args):
 
     obj = load_model_object(args.model)
     params = parse_params(args.param)
-    automaton_options = args.filter or args.observable or args.range or args.x0 is not None
+    automaton_options = args.filter or args.observable or args.range or args.x0 is not None or args.events
     if isinstance(obj, type):  # an ImpactOscillator subclass
         if not automaton_options:
             return None
@@ -181,6 +185,7 @@ def _histogram_frame(ens, name):
 
 def run(args, resolved) -> int:
     """Simulate the automaton, print the summary, write the CSV files, the sidecar and ``--summary-json``."""
+    import numpy as np
     import pandas as pd
 
     from hybrid.stochastic import atomic_write_text, simulate_automaton
@@ -219,7 +224,7 @@ def run(args, resolved) -> int:
                                  histograms=hist, stride=args.stride, chunk_paths=chunk,
                                  max_path_steps=args.max_path_steps, scheduler=args.scheduler,
                                  checkpoint=args.checkpoint, resume=args.resume,
-                                 checkpoint_every=args.checkpoint_every)
+                                 checkpoint_every=args.checkpoint_every, events=args.events)
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
     if args.scheme not in ("splitting", "symplectic", "baoab"):
         try:
@@ -251,6 +256,10 @@ def run(args, resolved) -> int:
                               "rate": [ens.rate(t) for t in ens.transitions]})
         atomic_write_text(path, table.to_csv(index=False, float_format="%.17g"))
         files.append(path)
+    if args.events:
+        path = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
+        atomic_write_text(path, ens.events_to_pandas().to_csv(index=False, float_format="%.17g"))
+        files.append(path)
 
     results = {"paths": args.paths, "samples": ens.flags["samples"], "wall_time": ens.wall_time,
                "observables": {}, "rates": {t: ens.rate(t) for t in ens.transitions},
@@ -262,6 +271,13 @@ def run(args, resolved) -> int:
     if "H" in names:
         est = ens.mean("H")
         results["mean_energy"] = {"value": est.value, "ci": est.ci}
+    if args.events:  # first-passage times: the mean over the paths whose kept firings include the transition
+        results["first_event_time"] = {}
+        for t in ens.transitions:
+            first = ens.first_event_times(t)
+            hit = first[np.isfinite(first)]
+            results["first_event_time"][t] = {"mean": float(hit.mean()) if hit.size else None,
+                                              "paths": int(hit.size)}
     settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "x0": list(x0),
                 "observables": {k: str(v) for k, v in obs.items()}, "engine": "simulate_automaton",
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
