@@ -27,24 +27,31 @@ TOTALS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out
           "stuck", "nonfinite", "h_under", "v_under", "bad_e")
 
 
-SLOW = pytest.mark.slow  # about 12 s each (two cold kernel compiles); the default suite keeps three geometries
+SLOW = pytest.mark.slow  # about 12 s each (two cold kernel compiles)
 
 
-@pytest.mark.parametrize("model", [
-    DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0),
-    pytest.param(DuffingImpact(restitution=Newton(0.7), a=1.0, b=0.2, c=0.05, D=0.05, delta=0.8), marks=SLOW),
-    ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None), restitution=Newton(0.8)),
-    pytest.param(ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
-                                  restitution=Ma(0.2)), marks=SLOW),
+MODELS = {
+    "ma-symmetric": DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0),
+    "newton-symmetric": DuffingImpact(restitution=Newton(0.7), a=1.0, b=0.2, c=0.05, D=0.05, delta=0.8),
+    "equilibrium-stop": ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None),
+                                         restitution=Newton(0.8)),
+    "one-sided": ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
+                                  restitution=Ma(0.2)),
     # G(x) has erf in it (it used to fail on arrays before any kernel ran)
-    ImpactOscillator("x + exp(-x**2)*x**2", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 0.9},
-                     restitution=Newton(0.8)),
-], ids=["ma-symmetric", "newton-symmetric", "equilibrium-stop", "one-sided", "erf-potential"])
-@pytest.mark.parametrize("scheme", ["milstein", "splitting"])
-def test_oscillator_schemes_run_on_the_automaton_kernel_with_the_oscillator_kernels_numbers(model, scheme):
+    "erf-potential": ImpactOscillator("x + exp(-x**2)*x**2", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 0.9},
+                                      restitution=Newton(0.8)),
+}
+# the default suite: milstein on three geometries, splitting on two; every pair with -m slow
+DEFAULT_PAIRS = {("milstein", "ma-symmetric"), ("milstein", "equilibrium-stop"), ("milstein", "erf-potential"),
+                 ("splitting", "ma-symmetric"), ("splitting", "one-sided")}
+
+
+@pytest.mark.parametrize("scheme, name", [
+    pytest.param(scheme, name, marks=() if (scheme, name) in DEFAULT_PAIRS else SLOW, id=f"{scheme}-{name}")
+    for scheme in ("milstein", "splitting") for name in MODELS])
+def test_oscillator_schemes_run_on_the_automaton_kernel_with_the_oscillator_kernels_numbers(scheme, name):
     # milstein runs as the automaton's symplectic scheme, splitting (BAOAB) as its baoab scheme
-    if scheme == "splitting" and model.params.get("delta") == 0.9:
-        pytest.skip("this model is here for its G(x), which milstein covers; each pair costs two cold compiles")
+    model = MODELS[name]
     kw = dict(dt=2e-3 if scheme == "milstein" else 0.02, paths=16, t_end=200.0, t_burn=20.0, seed=3, chunk_paths=8,
               bins=80, v_bins=50)
     new = simulate_ensemble(model, scheme, **kw)
@@ -234,7 +241,7 @@ def test_zero_noise_impact_times_and_speeds_match_the_heyoka_orbit(scheme):
         assert max(ratios) / min(ratios) < 1.02, ratios
 
 
-@pytest.mark.parametrize("scheme", ["symplectic", "baoab"])
+@pytest.mark.parametrize("scheme", ["symplectic", pytest.param("baoab", marks=SLOW)])
 def test_ensemble_event_logs_match_the_heyoka_orbit_at_zero_noise(scheme):
     # the ensemble kernel's own per-path log (simulate_automaton(events=K)), D = 0: every path is the orbit;
     # measured worst time error 2.3 dt (symplectic) and 2.3 dt (baoab) at dt = 1e-3, 6 impacts
@@ -272,7 +279,7 @@ def test_event_log_requests_are_checked():
         simulate_automaton(a, "symplectic", events=2, **kw).first_event_times("up")
 
 
-@pytest.mark.parametrize("scheme", ["splitting", "baoab"])
+@pytest.mark.parametrize("scheme", [pytest.param("splitting", marks=SLOW), "baoab"])
 def test_direction_zero_guards_give_the_directed_guards_numbers(scheme):
     # modes a -> b when x crosses 0.5 and b -> a when x crosses -0.5 on x'' + c x' + x = noise: from x = 0 moving
     # up, the first crossing of each guard is in the direction a +1 / -1 guard also fires in, so a guard of
