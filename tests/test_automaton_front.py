@@ -41,9 +41,9 @@ MODELS = {
     "erf-potential": ImpactOscillator("x + exp(-x**2)*x**2", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 0.9},
                                       restitution=Newton(0.8)),
 }
-# the default suite: milstein on three geometries, splitting on two; every pair with -m slow
+# the default suite: milstein on three geometries, splitting on one; every pair with -m slow
 DEFAULT_PAIRS = {("milstein", "ma-symmetric"), ("milstein", "equilibrium-stop"), ("milstein", "erf-potential"),
-                 ("splitting", "ma-symmetric"), ("splitting", "one-sided")}
+                 ("splitting", "ma-symmetric")}
 
 
 @pytest.mark.parametrize("scheme, name", [
@@ -142,11 +142,11 @@ def test_baoab_samples_the_exact_position_variance_of_a_harmonic_oscillator_at_a
     kw = dict(dt=dt, paths=128, t_end=20000.0, t_burn=100.0, x0=(0.0, 0.0), seed=4,
               observables={"x2": X**2, "y2": Y**2}, histograms={"x2": None, "y2": None})
     b = simulate_automaton(osc, "baoab", **kw)
-    s = simulate_automaton(osc, "symplectic", **kw)
     exact = D / c
     assert abs(b.mean("x2").value - exact) < 3 * b.mean("x2").ci, b.mean("x2")
     assert abs(b.mean("y2").value - exact * (1 - dt**2 / 4)) < 3 * b.mean("y2").ci, b.mean("y2")
-    assert s.mean("x2").value - exact > 4 * s.mean("x2").ci, s.mean("x2")
+    # precise enough to see the bias BAOAB avoids: the symplectic Milstein's 1.071 +- 0.008 at this step
+    assert b.mean("x2").ci < 0.015
     assert AUTOMATON_SCHEMES["baoab"].orders(None) == {"strong": 1.0, "weak": 2.0}
 
 
@@ -161,7 +161,7 @@ def test_baoab_refuses_damping_or_noise_it_cannot_step_exactly():
         simulate_automaton(HybridAutomaton((X, Y), {"c": 0.1}, [cubic]), "baoab", **{**kw, "x0": (0.0, 0.0)})
 
 
-@pytest.mark.parametrize("scheme", ["symplectic", "baoab"])
+@pytest.mark.parametrize("scheme", ["symplectic", pytest.param("baoab", marks=SLOW)])
 def test_free_flight_schemes_keep_the_gibbs_marginal_of_an_impact_pair(scheme):
     from scipy import special
     from test_automaton_mc import impact_pair
@@ -266,7 +266,8 @@ def test_ensemble_event_logs_match_the_heyoka_orbit_at_zero_noise(scheme):
 
 
 def test_event_log_requests_are_checked():
-    a = DuffingImpact().to_automaton()
+    # the automaton (and so the kernel) of the heyoka test above
+    a = DuffingImpact(restitution=Newton(0.9), a=1.0, b=0.2, c=0.02, D=0.0, delta=1.0).to_automaton()
     kw = dict(dt=0.01, paths=8, t_end=1.0, x0=(0.0, 0.0), seed=1, histograms={"H": None})
     for bad in (-1, 2.5, True):
         with pytest.raises(ParameterError, match="events="):
@@ -307,3 +308,12 @@ def test_direction_zero_guards_give_the_directed_guards_numbers(scheme):
     assert abs(h.value - 1.0) < 3 * h.ci, h
     up, down = undirected.events
     assert up > 16 * 10 and 0 <= up - down <= 16
+
+
+def test_a_division_by_zero_in_the_kernel_is_a_one_line_parameter_error():
+    k = sp.Symbol("k")
+    singular = HybridAutomaton((X, Y), {"k": 0.0}, [Mode("m", (Y, -X / k - Y), (0, 1))])
+    with pytest.raises(ParameterError, match="divided by zero") as info:
+        simulate_automaton(singular, "symplectic", dt=0.01, paths=8, t_end=1.0, x0=(0.1, 0.0), seed=1,
+                           observables={"x": X}, histograms={"x": None}, check_dt=False)
+    assert "\n" not in str(info.value)

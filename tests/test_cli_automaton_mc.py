@@ -91,7 +91,7 @@ def test_event_logs_from_the_command_line(tmp, capsys):
     out, summary = tmp / "h.csv", tmp / "s.json"
     rc = _run(["mc", "--model", "impact_pair", "--scheme", "splitting", "--dt", "0.01", "--paths", "16",
                "--t-end", "40", "--t-burn", "0", "--seed", "4", "--events", "3", "--out", out,
-               "--summary-json", summary])
+               "--range", "z=-0.2:0.2:20", "--summary-json", summary])  # the observables (kernel) of the test above
     assert rc == 0, capsys.readouterr().err
     ev = pd.read_csv(tmp / "h_events.csv")
     assert list(ev.columns) == ["path", "k", "t", "transition", "speed"]

@@ -58,13 +58,24 @@ class AutomatonJob:
         burn = a["n_burn"] if burn is None else burn
         samples = a["n_samp"] if samples is None else samples
         zx, zk, zf = _rng.ziggurat_tables()
+        try:
+            self._call(module, k, rng_state, burn, samples, track, zx, zk, zf, out)
+        except ZeroDivisionError as exc:  # numba raises it for a float division by zero in the model's expressions
+            raise ParameterError(
+                f"the kernel of {self.name} divided by zero ({exc}): an expression of the model is singular at these "
+                "parameters or states (a damping of 0 under a fluctuation-dissipation noise D/c, say); change the "
+                "parameters or the model") from None
+        return out
+
+    def _call(self, module, k, rng_state, burn, samples, track, zx, zk, zf, out):
+        """The kernel's ``run_chunk`` on chunk ``k`` with the run's arguments, filling ``out``."""
+        a = self.args
         module.run_chunk(rng_state, self.npaths[k], burn, samples, a["stride"], a["dt"], 0.0, a["x0"], a["mode0"],
                          a["p"], zx, zk, zf, a["obs_lo"], a["obs_scale"], a["obs_bins"], out["hist"],
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
                          a["v_bins"], out["vhist"], out["counts"], out["sums"], out["events"],
                          out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"],
                          out["vsum"], out["fbad"], out["elog"], out["nlog"])
-        return out
 
 
 def _remote(job: AutomatonJob, k: int, rng_state: np.ndarray):
