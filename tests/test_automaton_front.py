@@ -90,12 +90,12 @@ X, Y = sp.symbols("x y")
 
 
 def test_a_failed_transition_check_is_counted_and_reported():
-    base = DuffingImpact(restitution=Newton(0.8)).to_automaton()
+    base = DuffingImpact(restitution=Newton(0.9)).to_automaton()  # the kernel of the event-log tests below
     checked = HybridAutomaton(
         base.states, dict(base.parameters), list(base.modes),
         [Transition(t.name, t.source, t.target, t.guard, t.direction, t.reset, t.priority, check=sp.Abs(Y) < 0.5)
          for t in base.transitions], observables=dict(base.observables))
-    kw = dict(dt=2e-3, paths=8, t_end=100.0, x0=(0.0, 0.0), seed=1, histograms={"H": (0.0, 4.0, 40)})
+    kw = dict(dt=2e-3, paths=8, t_end=100.0, x0=(0.0, 0.0), seed=1, histograms={"H": None})
     with pytest.warns(VibroWarning, match="failed their transition's check"):
         ens = simulate_automaton(checked, "symplectic", **kw)
     # firings surely above speed 0.5, from the speed histogram (bins starting at 0.5 or higher, and the overflow)
