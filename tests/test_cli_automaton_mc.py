@@ -198,3 +198,21 @@ def test_automaton_checkpoint_and_resume_from_the_command_line_match_one_run(tmp
     rc = _run(base + ["--out", tmp / "four.csv", "--checkpoint", tmp / "ck", "--resume", "--seed", "3"])
     err = capsys.readouterr().err
     assert rc == 2 and "another run" in err and len(err.strip().splitlines()) == 1
+
+
+def test_oscillator_scheme_names_mean_the_same_on_the_automaton_route():
+    # an oscillator model sent through the automaton engine (--observable, --range, --x0, --events) runs milstein
+    # and splitting as the oscillator path does (symplectic, baoab) where it admits them; a filtered model, or one
+    # BAOAB refuses, keeps the automaton's own schemes
+    from argparse import Namespace
+
+    from models import DuffingImpact, ImpactOscillator
+    from vibro.cli.mc_automaton import _scheme_for
+
+    duffing = DuffingImpact().to_automaton()
+    rayleigh = ImpactOscillator("x", "c*y + y**3", parameters={"c": 0.1, "D": 0.05, "delta": 1.0}).to_automaton()
+    assert _scheme_for(Namespace(scheme="milstein"), duffing, True) == "symplectic"
+    assert _scheme_for(Namespace(scheme="splitting"), duffing, True) == "baoab"
+    assert _scheme_for(Namespace(scheme="splitting"), rayleigh, True) == "splitting"
+    assert _scheme_for(Namespace(scheme="splitting"), duffing, False) == "splitting"
+    assert _scheme_for(Namespace(scheme="em"), duffing, True) == "em"

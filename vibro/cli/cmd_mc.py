@@ -208,6 +208,14 @@ def _run_forced(args, model, started) -> int:
     if not (math.isfinite(args.h_max) and args.h_max > 0):
         raise ParameterError(f"--h-max {args.h_max!r} must be a finite energy > 0")
     automaton = model.to_automaton()
+    if scheme == "baoab":  # refused in the oscillator's words, not the automaton scheme's
+        from hybrid.stochastic._auto_codegen import analyse
+
+        try:
+            AUTOMATON_SCHEMES["baoab"].check(analyse(automaton))
+        except ModelError:
+            raise ModelError(f"--scheme splitting (BAOAB) needs damping linear in y and noise independent of y, but "
+                             f"h = {model.h}; use --scheme milstein") from None
     lo, hi = model.barriers
     x_span = math.sqrt(2.0 * args.h_max) * 2.0
     x_lo = lo if math.isfinite(lo) else -x_span

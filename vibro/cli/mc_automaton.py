@@ -183,6 +183,24 @@ def _histogram_frame(ens, name):
                          "density": df["density"]})
 
 
+def _scheme_for(args, automaton, oscillator: bool) -> str:
+    """The automaton scheme that runs ``--scheme``: for an oscillator model (not filtered) milstein and splitting
+    mean what they mean on the oscillator path, the automaton's symplectic and baoab, where the model admits them
+    (else the automaton's own milstein and splitting run)."""
+    from hybrid.errors import ModelError
+    from hybrid.stochastic import AUTOMATON_SCHEME_OF, AUTOMATON_SCHEMES
+    from hybrid.stochastic._auto_codegen import analyse
+
+    mapped = AUTOMATON_SCHEME_OF.get(args.scheme) if oscillator else None
+    if mapped is None:
+        return args.scheme
+    try:
+        AUTOMATON_SCHEMES[mapped].check(analyse(automaton))
+    except ModelError:
+        return args.scheme
+    return mapped
+
+
 def run(args, resolved) -> int:
     """Simulate the automaton, print the summary, write the CSV files, the sidecar and ``--summary-json``."""
     import numpy as np
@@ -194,6 +212,7 @@ def run(args, resolved) -> int:
     from vibro.provenance import record, write_sidecar
 
     automaton, params, base = resolved
+    scheme = _scheme_for(args, automaton, base is not None and not args.filter)
     if args.joint:
         raise ParameterError("--joint is for oscillator models; automaton models write their observables' "
                              "histograms (--observable, --range)")
@@ -219,19 +238,19 @@ def run(args, resolved) -> int:
     started = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")
-        ens = simulate_automaton(automaton, args.scheme, dt=args.dt, paths=args.paths, t_end=args.t_end,
+        ens = simulate_automaton(automaton, scheme, dt=args.dt, paths=args.paths, t_end=args.t_end,
                                  t_burn=args.t_burn, x0=x0, params=params, seed=args.seed, observables=obs,
                                  histograms=hist, stride=args.stride, chunk_paths=chunk,
                                  max_path_steps=args.max_path_steps, scheduler=args.scheduler,
                                  checkpoint=args.checkpoint, resume=args.resume,
                                  checkpoint_every=args.checkpoint_every, events=args.events)
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
-    if args.scheme not in ("splitting", "symplectic", "baoab"):
+    if scheme not in ("splitting", "symplectic", "baoab"):
         try:
             from hybrid.stochastic import AUTOMATON_SCHEMES
 
             AUTOMATON_SCHEMES["splitting"].check(analyse(automaton))
-            notes.append(f"scheme {args.scheme!r} is explicit in the drift and pumps energy into lightly damped "
+            notes.append(f"scheme {scheme!r} is explicit in the drift and pumps energy into lightly damped "
                          "oscillations (a bias ~ stiffness x dt / damping); this model admits --scheme symplectic or "
                          "splitting (or baoab where its damping is linear)")
         except Exception:  # splitting does not apply: nothing better to suggest
@@ -278,7 +297,8 @@ def run(args, resolved) -> int:
             hit = first[np.isfinite(first)]
             results["first_event_time"][t] = {"mean": float(hit.mean()) if hit.size else None,
                                               "paths": int(hit.size)}
-    settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "x0": list(x0),
+    settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "scheme_requested": args.scheme,
+                "x0": list(x0),
                 "observables": {k: str(v) for k, v in obs.items()}, "engine": "simulate_automaton",
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
     description = automaton.describe() if hasattr(automaton, "describe") else describe_automaton(automaton)
@@ -289,7 +309,7 @@ def run(args, resolved) -> int:
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
 
-    print(f"vibro mc: automaton {args.scheme} dt={args.dt:g} paths={args.paths} seed={args.seed} "
+    print(f"vibro mc: automaton {scheme} dt={args.dt:g} paths={args.paths} seed={args.seed} "
           f"states={[s.name for s in automaton.states]}")
     print(f"  wall            {ens.wall_time:.2f} s")
     for name in names:
