@@ -207,12 +207,12 @@ def test_oscillator_scheme_names_mean_the_same_on_the_automaton_route():
     from argparse import Namespace
 
     from models import DuffingImpact, ImpactOscillator
-    from vibro.cli.mc_automaton import _scheme_for
+    from vibro.cli.mc_automaton import scheme_for
 
     duffing = DuffingImpact().to_automaton()
     rayleigh = ImpactOscillator("x", "c*y + y**3", parameters={"c": 0.1, "D": 0.05, "delta": 1.0}).to_automaton()
-    assert _scheme_for(Namespace(scheme="milstein"), duffing, True) == "symplectic"
-    assert _scheme_for(Namespace(scheme="splitting"), duffing, True) == "baoab"
-    assert _scheme_for(Namespace(scheme="splitting"), rayleigh, True) == "splitting"
-    assert _scheme_for(Namespace(scheme="splitting"), duffing, False) == "splitting"
-    assert _scheme_for(Namespace(scheme="em"), duffing, True) == "em"
+    assert scheme_for(Namespace(scheme="milstein"), duffing, True) == "symplectic"
+    assert scheme_for(Namespace(scheme="splitting"), duffing, True) == "baoab"
+    assert scheme_for(Namespace(scheme="splitting"), rayleigh, True) == "splitting"
+    assert scheme_for(Namespace(scheme="splitting"), duffing, False) == "splitting"
+    assert scheme_for(Namespace(scheme="em"), duffing, True) == "em"

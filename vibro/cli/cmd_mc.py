@@ -20,7 +20,7 @@ import warnings
 from hybrid.errors import ParameterError
 from vibro.cli.common import add_model_arguments, model_from_args
 from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
-from vibro.cli.mc_automaton import automaton_from_args
+from vibro.cli.mc_automaton import automaton_from_args, scheme_for
 from vibro.cli.mc_automaton import run as run_automaton
 from vibro.cli.names import AUTOMATON_ONLY_SCHEMES, SCHEMES
 
@@ -191,10 +191,7 @@ def _run_forced(args, model, started) -> int:
         target = _phases_path(args)
         if not target.resolve().parent.is_dir() or target.is_dir():
             raise ParameterError(f"--phases-out {str(target)!r}: the directory does not exist or it is a directory")
-    # an oscillator's scheme names mean the same forced or not: milstein and splitting are the automaton's
-    # symplectic and baoab (the explicit automaton milstein would pump energy); em stays em
-    scheme = AUTOMATON_SCHEME_OF.get(args.scheme, args.scheme)
-    if scheme not in AUTOMATON_SCHEMES:
+    if args.scheme not in set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF):
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
                              f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")
     for flag, value in (("--checkpoint", args.checkpoint), ("--scheduler", args.scheduler if args.scheduler
@@ -208,14 +205,8 @@ def _run_forced(args, model, started) -> int:
     if not (math.isfinite(args.h_max) and args.h_max > 0):
         raise ParameterError(f"--h-max {args.h_max!r} must be a finite energy > 0")
     automaton = model.to_automaton()
-    if scheme == "baoab":  # refused in the oscillator's words, not the automaton scheme's
-        from hybrid.stochastic._auto_codegen import analyse
-
-        try:
-            AUTOMATON_SCHEMES["baoab"].check(analyse(automaton))
-        except ModelError:
-            raise ModelError(f"--scheme splitting (BAOAB) needs damping linear in y and noise independent of y, but "
-                             f"h = {model.h}; use --scheme milstein") from None
+    # an oscillator's scheme names mean the same forced or not, on the same rule as the automaton route
+    scheme = scheme_for(args, automaton, True)
     lo, hi = model.barriers
     x_span = math.sqrt(2.0 * args.h_max) * 2.0
     x_lo = lo if math.isfinite(lo) else -x_span

@@ -183,10 +183,11 @@ def _histogram_frame(ens, name):
                          "density": df["density"]})
 
 
-def _scheme_for(args, automaton, oscillator: bool) -> str:
+def scheme_for(args, automaton, oscillator: bool) -> str:
     """The automaton scheme that runs ``--scheme``: for an oscillator model (not filtered) milstein and splitting
     mean what they mean on the oscillator path, the automaton's symplectic and baoab, where the model admits them
-    (else the automaton's own milstein and splitting run)."""
+    (else the automaton's own milstein and splitting run; ``settings['scheme']`` says which ran). Forced oscillator
+    models (``cmd_mc``) take the same rule."""
     from hybrid.errors import ModelError
     from hybrid.stochastic import AUTOMATON_SCHEME_OF, AUTOMATON_SCHEMES
     from hybrid.stochastic._auto_codegen import analyse
@@ -212,7 +213,7 @@ def run(args, resolved) -> int:
     from vibro.provenance import record, write_sidecar
 
     automaton, params, base = resolved
-    scheme = _scheme_for(args, automaton, base is not None and not args.filter)
+    scheme = scheme_for(args, automaton, base is not None and not args.filter)
     if args.joint:
         raise ParameterError("--joint is for oscillator models; automaton models write their observables' "
                              "histograms (--observable, --range)")
