@@ -29,6 +29,33 @@ PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "events", "gstat", "phi
 """The kernel's per-chunk outputs, in its argument order."""
 
 
+COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside", "bad_reset")
+"""Names of the per-chunk counters, in the kernel's order."""
+
+
+def chunk_shapes(n_obs: int, width: int, joint_bins: tuple, n_trans: int, v_bins: int, n_phases: int,
+                 chunk_paths: int, n_log: int) -> dict:
+    """``(shape, dtype, fill)`` of each per-chunk output of ``run_chunk`` (:data:`PER_CHUNK`).
+
+    ``width``: histogram bins + 2 (underflow, overflow) of the widest observable; ``joint_bins``: (nx, ny);
+    ``n_log``: event-log rows per path (0: none).
+
+    Examples
+    --------
+    >>> chunk_shapes(2, 12, (1, 1), 2, 100, 1, 8, 0)["elog"][0]
+    (8, 0, 3)
+    """
+    i64, n_tr = np.int64, max(n_trans, 1)
+    return {
+        "hist": ((n_obs, width), i64, 0), "jhist": ((int(joint_bins[1]), int(joint_bins[0])), i64, 0),
+        "vhist": ((n_tr, int(v_bins) + 1), i64, 0), "counts": ((len(COUNT_NAMES),), i64, 0),
+        "sums": ((n_obs,), float, 0.0), "events": ((n_tr,), i64, 0), "gstat": ((n_tr, 4), float, 0.0),
+        "phist": ((n_phases, n_obs, width), i64, 0), "psums": ((n_phases, n_obs), float, 0.0),
+        "pcount": ((n_phases,), i64, 0), "vsum": ((n_tr,), float, 0.0), "fbad": ((1,), float, 0.0),
+        "elog": ((chunk_paths, n_log, 3), float, np.nan), "nlog": ((chunk_paths,), i64, 0),
+    }
+
+
 class AutomatonJob:
     """Everything a chunk needs besides its id and stream: the kernel source and its arguments (picklable).
 

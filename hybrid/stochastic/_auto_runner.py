@@ -22,12 +22,10 @@ import sympy as sp
 from hybrid.errors import ModelError, ParameterError
 
 from . import _auto_codegen, _auto_exec, _rng
+from ._auto_exec import COUNT_NAMES
 from ._codegen import load_source
 from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, check_chunk_count
 from ._statistics import Estimate, ratio_estimate
-
-COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside", "bad_reset")
-"""Names of the per-chunk counters, in the kernel's order."""
 
 
 @dataclass(frozen=True)
@@ -385,15 +383,16 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     values = automaton.resolve_parameters(params)
     modes = list(st.modes)
     mode0 = automaton.initial_mode if mode0 is None else mode0
+    n_log = _as_count("events", events, "the events kept per path; 0: none")
+    if n_log > 10**6:
+        raise ParameterError(f"events={n_log} keeps more than 1e6 events per path; keep fewer")
     module, _ = load_source(f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}", src)
     out = np.empty((dws.shape[0], n))
-    if isinstance(events, bool) or not isinstance(events, (int, np.integer)) or not 0 <= events <= 10**6:
-        raise ParameterError(f"events={events!r} must be an integer in [0, 1e6]")
-    elog = np.full((dws.shape[0], int(events), 3), np.nan)
+    elog = np.full((dws.shape[0], n_log, 3), np.nan)
     nlog = np.zeros(dws.shape[0], dtype=np.int64)
     module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
                  out, elog, nlog)
-    return (out, elog, nlog) if events else out
+    return (out, elog, nlog) if n_log else out
 
 
 def _as_float(name, value, positive=True):
@@ -404,6 +403,13 @@ def _as_float(name, value, positive=True):
     if not math.isfinite(v) or (positive and not v > 0):
         raise ParameterError(f"{name}={value!r} must be a finite {'positive ' if positive else ''}number")
     return v
+
+
+def _as_count(name, value, meaning):
+    """``value`` as an int >= 0, or a one-line ParameterError naming ``meaning`` (what 0 or the count means)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ParameterError(f"{name}={value!r} must be an integer >= 0 ({meaning})")
+    return int(value)
 
 
 def _as_int(name, value):
@@ -518,9 +524,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     chunk_paths = _as_int("chunk_paths", chunk_paths)
     checkpoint_every = _as_int("checkpoint_every", checkpoint_every)
     dt_requested, phase_steps = dt, 1
-    if isinstance(phases, bool) or not isinstance(phases, (int, np.integer)) or phases < 0:
-        raise ParameterError(f"phases={phases!r} must be an integer >= 0 (0: no phase sections)")
-    phases = int(phases)
+    phases = _as_count("phases", phases, "0: no phase sections")
     if phases:
         if period is None:
             raise ParameterError("phases=N needs the forcing period: pass period=T (for a forced ImpactOscillator, "
@@ -547,9 +551,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
             "reduce paths or t_end, raise dt, or pass a larger max_path_steps"
         )
     check_chunk_count(paths, chunk_paths)  # before compiling: each chunk spawns its own stream
-    if isinstance(events, bool) or not isinstance(events, (int, np.integer)) or events < 0:
-        raise ParameterError(f"events={events!r} must be an integer >= 0 (the firings kept per path; 0: none)")
-    n_log = int(events)  # (the name events is taken below by the firing counts)
+    n_log = _as_count("events", events, "the firings kept per path; 0: none")  # (events: the firing counts below)
     if 24.0 * paths * n_log > MAX_EVENT_LOG_BYTES:
         raise ParameterError(
             f"events={n_log} for {paths} paths keeps {24.0 * paths * n_log / 2**30:.3g} GiB of event log, above "
@@ -632,17 +634,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     n_obs = max(len(names), 1)
     width = max(bins) + 2 if bins else 3
     n_tr = len(st.transitions)
-    n_ph = max(phases, 1)
-    i64 = np.int64
-    shapes = {
-        "hist": ((n_obs, width), i64, 0), "jhist": ((int(j_bins[1]), int(j_bins[0])), i64, 0),
-        "vhist": ((max(n_tr, 1), int(v_bins) + 1), i64, 0), "counts": ((len(COUNT_NAMES),), i64, 0),
-        "sums": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
-        "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((n_ph, n_obs, width), i64, 0),
-        "psums": ((n_ph, n_obs), float, 0.0), "pcount": ((n_ph,), i64, 0),
-        "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
-        "elog": ((chunk_paths, n_log, 3), float, np.nan), "nlog": ((chunk_paths,), i64, 0),
-    }
+    shapes = _auto_exec.chunk_shapes(n_obs, width, j_bins, n_tr, v_bins, max(phases, 1), chunk_paths, n_log)
     args = dict(n_burn=n_burn, n_samp=n_samp, stride=stride, dt=dt, x0=x0, mode0=mode_names.index(mode0),
                 p=np.array([values[k] for k in st.params], dtype=float),
                 obs_lo=np.array(lo or [0.0], dtype=float), obs_scale=np.array(scale or [1.0], dtype=float),

@@ -147,18 +147,9 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     xy = s["xy_bins"]
     (xlo, _), (ylo, _) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
     nx, ny = xy if xy is not None else (1, 1)
-    n_tr = len(st.transitions)
     n_obs = len(observables)
-    i64 = np.int64
-    shapes = {
-        "hist": ((n_obs, s["bins"] + 2), i64, 0), "jhist": ((ny, nx), i64, 0),
-        "vhist": ((max(n_tr, 1), s["v_bins"] + 1), i64, 0), "counts": ((6,), i64, 0),
-        "sums": ((n_obs,), float, 0.0), "events": ((max(n_tr, 1),), i64, 0),
-        "gstat": ((max(n_tr, 1), 4), float, 0.0), "phist": ((1, n_obs, s["bins"] + 2), i64, 0),
-        "psums": ((1, n_obs), float, 0.0), "pcount": ((1,), i64, 0),
-        "vsum": ((max(n_tr, 1),), float, 0.0), "fbad": ((1,), float, 0.0),
-        "elog": ((cp, 0, 3), float, 0.0), "nlog": ((cp,), i64, 0),  # no event log in oscillator ensembles
-    }
+    # one phase row (no sections) and no event log in oscillator ensembles
+    shapes = _auto_exec.chunk_shapes(n_obs, s["bins"] + 2, (nx, ny), len(st.transitions), s["v_bins"], 1, cp, 0)
     names = list(observables)
     ones = np.ones(n_obs)
     scale = ones.copy()
