@@ -277,8 +277,10 @@ def _lg(G, xs, i: int, j: int, k: int):
     return sum(G[l, j] * sp.diff(G[i, k], xs[l]) for l in range(len(xs)))
 
 
-def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> str:
+def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts: list) -> str:
     """Straight-line code of one step in mode ``k`` on the scalars ``_x0, _x1, ...`` when no guard may fire.
+
+    ``parts``: BAOAB's ``(v, F, c)`` of the mode (:func:`ou_parts`; empty for the other schemes).
 
     It computes the end of the step's flight into ``_y*`` and tests the guards leaving the mode there: a
     direction +1 guard still below 0 (-1: above 0) cannot have fired, so the step is committed here with the
@@ -323,7 +325,6 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str) -> st
     if scheme == "baoab":
         hdt, tm = sp.Symbol("hdt"), sp.Symbol("_tm")
         code_tm = {sp.Symbol("t"): tm}
-        parts = ou_parts(st, k)
         lines.append("_tm = t + hdt")
         block(lines, [f"_y{v}" for v, _, _ in parts], [xs[v] + hdt * F for v, F, _ in parts], "a")
         lines.extend(f"_y{q} = _x{q} + hdt * _y{v}" for q, v in st.pairs)
@@ -421,12 +422,12 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         names.dispatch("check", [[tr.check if tr.check is not None else sp.true] for tr in trs], None, "True"),
     ]
     # BAOAB's force and damping rate per velocity (zeros for the other schemes: their code never calls these)
+    parts = [ou_parts(st, k) if scheme == "baoab" else [] for k in range(len(st.modes))]
     force, damping = [], []
     for k in range(len(st.modes)):
         fk, ck = [sp.Integer(0)] * n, [sp.Integer(0)] * n
-        if scheme == "baoab":
-            for v, F, c in ou_parts(st, k):
-                fk[v], ck[v] = F, c
+        for v, F, c in parts[k]:
+            fk[v], ck[v] = F, c
         force.append(fk)
         damping.append(ck)
     funcs += [names.dispatch("bforce", force, "out"), names.dispatch("odamp", damping, "out")]
@@ -444,7 +445,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     fast = []
     for k in range(len(st.modes)):
         fast.append(f"{'if' if k == 0 else 'elif'} mode == {k}:")
-        fast.append(textwrap.indent(_fast_step(st, names, k, scheme), "    "))
+        fast.append(textwrap.indent(_fast_step(st, names, k, scheme, parts[k]), "    "))
     # the fast step's guard tests settle the admissible-set check of a sample, unless the splitting's noise and
     # kick, or BAOAB's closing kick, after the flight move a guard that depends on velocities
     velocities = {real_symbol(st.states[v]) for _, v in st.pairs}
