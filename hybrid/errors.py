@@ -45,5 +45,10 @@ class HistogramRangeWarning(VibroWarning):
     """More than a small share of the samples fell outside a histogram's range (they are counted, not binned)."""
 
 
+class OutputError(ParameterError):
+    """An output cannot be written: a missing or read-only folder, a name too long, a directory or special file in
+    the way, two outputs on one file, or a full disk. Raised before the work starts wherever it can be foreseen."""
+
+
 class CudaUnavailableError(VibroError):
     """``scheduler='cuda'`` was asked for, but numba-cuda is not installed or no CUDA device was found."""

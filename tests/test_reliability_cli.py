@@ -29,10 +29,10 @@ BAD = [
     (["orbit", "--backend", "scipy", "--rtol", "1e-15"], "double precision"),
     # work and memory bounds
     (["pdf", "--out", "{tmp}/p.csv", "--points", "1000000000"], "GiB"),
-    (["pdf", "--out", "{tmp}/p.csv", "--points", "1e9"], "invalid int value"),
+    (["pdf", "--out", "{tmp}/p.csv", "--points", "1e9"], "--points: '1e9' is not an integer"),
     (["pdf", "--out", "{tmp}/p.csv", "--joint", "{tmp}/j.csv", "--joint-points", "100000"], "GiB"),
     (["orbit", "--max-impacts", "1000000000000"], "GiB"),
-    (["orbit", "--max-steps", "0"], "max_steps"),
+    (["orbit", "--max-steps", "0"], "--max-steps=0"),
     # user model classes
     (["orbit", "--model", "{tmp}/bad.py:Bad"], "raised RuntimeError: constructor failed"),
     (["orbit", "--model", "{tmp}/bad.py:Needs"], "cannot be built without arguments"),

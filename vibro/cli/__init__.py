@@ -10,6 +10,7 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import sys
 import warnings
 
@@ -71,7 +72,61 @@ def build_parser() -> argparse.ArgumentParser:
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
         if info.name.startswith("cmd_"):
             importlib.import_module(f"{__name__}.{info.name}").register(sub)
+    for command in sub.choices.values():  # every number on the command line is read by one rule
+        for action in command._actions:
+            if action.type is int:
+                action.type = checked_int
+            elif action.type is float:
+                action.type = checked_float
     return parser
+
+
+LARGEST_INT = 2**53
+"""Integer options above this are refused when read: no count, seed or size of this package needs more, and numpy,
+numba and heyoka overflow (or crash) on integers beyond 64 bits."""
+
+
+def checked_int(text: str) -> int:
+    """An integer option: digits only (no ``1e3``, no ``2.5``), at most :data:`LARGEST_INT` in magnitude.
+
+    Examples
+    --------
+    >>> checked_int("64")
+    64
+    >>> checked_int("1" + "0" * 30)
+    Traceback (most recent call last):
+    ...
+    argparse.ArgumentTypeError: 1000000000000000000000000000000 is too large (at most 2^53 = 9007199254740992)
+    """
+    try:
+        value = int(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if abs(value) > LARGEST_INT:
+        raise argparse.ArgumentTypeError(f"{text} is too large (at most 2^53 = {LARGEST_INT})")
+    return value
+
+
+def checked_float(text: str) -> float:
+    """A real option: NaN is refused when read (every range check downstream would pass it silently); infinities
+    reach the command, which says whether it takes them.
+
+    Examples
+    --------
+    >>> checked_float("1e-3"), checked_float("inf")
+    (0.001, inf)
+    >>> checked_float("nan")
+    Traceback (most recent call last):
+    ...
+    argparse.ArgumentTypeError: 'nan' is not a number
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if value != value:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number")
+    return value
 
 
 EXIT_BROKEN_PIPE = 141
@@ -135,12 +190,48 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         return _stdout_gone()
     except VibroError as exc:
-        print(f"vibro {args.command}: error: {exc}", file=sys.stderr)
+        print(f"vibro {args.command}: error: {flag_names(_one_line(exc), parser, args.command)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"vibro {args.command}: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print(f"vibro {args.command}: error: not enough memory for this request; make it smaller (fewer points, "
+              "paths or bins)", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file that vanished or a disk that filled while the command ran
+        where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
+        print(f"vibro {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a defect of ours: one line for the user, the traceback on request
+        if os.environ.get("VIBRO_DEBUG"):
+            raise
+        print(f"vibro {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} (this is a bug; "
+              "VIBRO_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
     return int(status or 0)
+
+
+def flag_names(message: str, parser: argparse.ArgumentParser, command: str) -> str:
+    """``message`` with the API's argument names (``max_steps=0``) spelt as the command's flags (``--max-steps=0``),
+    so that a refusal names what the user typed.
+
+    Examples
+    --------
+    >>> flag_names("max_impacts=0 must be an integer >= 1", build_parser(), "orbit")
+    '--max-impacts=0 must be an integer >= 1'
+    """
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for action in sub.choices[command]._actions:
+        longest = max(action.option_strings, key=len, default="")
+        if longest.startswith("--") and action.dest not in ("help", "param"):
+            message = re.sub(rf"(?<![\w.-]){re.escape(action.dest)}=", f"{longest}=", message)
+    return message
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 400 else text[:397] + "..."
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -37,6 +37,9 @@ def run(args) -> int:
 
     from hybrid.errors import ParameterError
 
+    from hybrid.io import check_output_dir
+
+    check_output_dir(args.out_dir, "--out-dir")
     t0 = time.perf_counter()
     parts = tuple(s.strip() for s in args.parts.split(",")) if args.parts else None
     if args.task == "work-precision":

@@ -69,7 +69,10 @@ def run(args) -> int:
     targets = _targets(args.number)
     if args.dpi < 20 or args.dpi > 600:
         raise ParameterError(f"--dpi {args.dpi} is outside 20-600")
+    from hybrid.io import check_output_dir
     from vibro.cli import progress_mode
+
+    check_output_dir(args.out_dir, "--out-dir")
     from vibro.studies.figures import run_figure
 
     mode = progress_mode(args.progress)

@@ -87,21 +87,16 @@ def run(args) -> int:
     from hybrid.stochastic import atomic_write_text, simulate_ensemble
     from vibro.provenance import record, write_sidecar
 
-    for name in ("out", "joint", "summary_json"):
-        target = getattr(args, name)
-        if target is not None and not Path(target).resolve().parent.is_dir():
-            raise ParameterError(f"--{name.replace('_', '-')} {target!r}: the directory does not exist")
-        if target is not None and Path(target).is_dir():  # found before the run, not after it
-            raise ParameterError(f"--{name.replace('_', '-')} {target!r} is a directory; give a file name")
+    plan = plan_outputs(args)  # every path checked before the run, not after it
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
     resolved = automaton_from_args(args)  # None: an oscillator model without automaton options
     if resolved is not None:
-        return run_automaton(args, resolved)
+        return run_automaton(args, resolved, plan)
     model = model_from_args(args)
     started = time.perf_counter()
     if getattr(model, "is_forced", False) or args.phases:
-        return _run_forced(args, model, started)
+        return _run_forced(args, model, started, plan)
     if args.scheme in AUTOMATON_ONLY_SCHEMES:
         same = {"symplectic": "milstein runs the same step (velocity first, then the exact free flight)",
                 "baoab": "splitting runs the same step (kick, half flight, exact OU step, half flight, kick)"}
@@ -154,6 +149,21 @@ def run(args) -> int:
     return 0
 
 
+def plan_outputs(args):
+    """The files and folder ``vibro mc`` writes, checked together (writable, no two on one file) before the run."""
+    from hybrid.io import OutputPlan
+
+    plan = OutputPlan()
+    plan.file(args.out, "--out", sidecar=True)
+    if args.joint:
+        plan.file(args.joint, "--joint")
+    if args.summary_json:
+        plan.file(args.summary_json, "--summary-json")
+    if args.checkpoint is not None:
+        plan.folder(args.checkpoint, "--checkpoint")
+    return plan
+
+
 def _phases_path(args):
     from pathlib import Path
 
@@ -163,7 +173,7 @@ def _phases_path(args):
     return out.with_name(f"{out.stem}_phases{out.suffix or '.csv'}")
 
 
-def _run_forced(args, model, started) -> int:
+def _run_forced(args, model, started, plan) -> int:
     """A forced model: Monte Carlo of its automaton (simulate_automaton), time-averaged and phase-resolved."""
     import math
 
@@ -188,9 +198,7 @@ def _run_forced(args, model, started) -> int:
             raise ParameterError(f"--phases needs a model with a periodic forcing (model {model.name!r} has "
                                  f"{'none' if not model.is_forced else 'F = ' + str(model.forcing)}); declare "
                                  "forcing='A*cos(Omega*t)'")
-        target = _phases_path(args)
-        if not target.resolve().parent.is_dir() or target.is_dir():
-            raise ParameterError(f"--phases-out {str(target)!r}: the directory does not exist or it is a directory")
+        plan.file(_phases_path(args), "--phases-out")
     if args.scheme not in set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF):
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
                              f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")

@@ -9,15 +9,40 @@ from pathlib import Path
 from hybrid.errors import ModelError, ParameterError
 
 
+DEFAULT_STATE = (0.0, 2.2)
+
+
+def initial_state(args) -> tuple[float, float]:
+    """(x0, v0) from ``--x0 X [V]`` and ``--v0 V``, one spelling of the state across commands.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> initial_state(SimpleNamespace(x0=[0.5], v0=None)), initial_state(SimpleNamespace(x0=None, v0=1.0))
+    ((0.5, 2.2), (0.0, 1.0))
+    """
+    values = list(args.x0) if args.x0 is not None else [DEFAULT_STATE[0]]
+    if len(values) > 2:
+        raise ParameterError(f"--x0 gives {len(values)} values; an oscillator's state is the position and the "
+                             "velocity: --x0 X V")
+    if len(values) == 2 and args.v0 is not None:
+        raise ParameterError("--x0 X V already sets the velocity; drop --v0")
+    v0 = values[1] if len(values) == 2 else (args.v0 if args.v0 is not None else DEFAULT_STATE[1])
+    state = (float(values[0]), float(v0))
+    if not all(math.isfinite(v) for v in state):
+        raise ParameterError(f"--x0 {state[0]:g} {state[1]:g}: the initial state must be finite")
+    return state
+
+
 def register(subparsers) -> None:
     """Add the ``orbit`` subcommand.
 
     Examples
     --------
     >>> from vibro.cli import build_parser
-    >>> args = build_parser().parse_args(["orbit", "--v0", "2.2", "--t-end", "5"])
-    >>> args.backend, args.v0
-    ('heyoka', 2.2)
+    >>> args = build_parser().parse_args(["orbit", "--x0", "0", "2.2", "--t-end", "5"])
+    >>> args.backend, initial_state(args)
+    ('heyoka', (0.0, 2.2))
     """
     from .common import add_model_arguments
 
@@ -29,8 +54,11 @@ def register(subparsers) -> None:
                     "and the exact two-impact loss) and eq. 14 (quasi-period).",
     )
     add_model_arguments(p)
-    p.add_argument("--x0", type=float, default=0.0, help="initial position, inside the gap (default 0)")
-    p.add_argument("--v0", type=float, default=2.2, help="initial velocity (default 2.2)")
+    p.add_argument("--x0", type=float, nargs="+", default=None, metavar="X [V]",
+                   help="initial state, as in vibro mc: the position, or the position and the velocity (default: "
+                        f"{DEFAULT_STATE[0]:g} {DEFAULT_STATE[1]:g}); the position must lie inside the gap")
+    p.add_argument("--v0", type=float, default=None,
+                   help=f"initial velocity alone, for --x0 X (default {DEFAULT_STATE[1]:g})")
     p.add_argument("--t-end", type=float, default=60.0, dest="t_end",
                    help="final time (default 60); cost ∝ impacts up to t-end")
     p.add_argument("--backend", choices=["heyoka", "scipy"], default="heyoka",
@@ -138,9 +166,14 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--rtol {args.rtol!r} must lie in (0, 1)")
     if args.rows < 0:
         raise ParameterError(f"--rows {args.rows} must be >= 0")
+    if args.out is not None:
+        from hybrid.io import OutputPlan
+
+        OutputPlan().file(args.out, "--out", sidecar=True)
+    x0, v0 = initial_state(args)
     model = model_from_args(args)
     model.restitution.validate()
-    res = simulate_orbit(model, (args.x0, args.v0), args.t_end, backend=args.backend, rtol=args.rtol,
+    res = simulate_orbit(model, (x0, v0), args.t_end, backend=args.backend, rtol=args.rtol,
                          max_impacts=args.max_impacts, max_steps=args.max_steps)
     df = res.to_pandas()
     params = " ".join(f"{k}={v:g}" for k, v in model.params.items())
@@ -149,11 +182,11 @@ def run(args: argparse.Namespace) -> int:
         print("note: the noise is ignored; eqs. 11-14 assume a free orbit (h = 0), so expect deviations when h != 0")
     print(f"status {res.status}: {res.message}; {res.n_impacts} impacts, {res.n_steps} steps, "
           f"{res.wall_time:.3f} s (compile {res.compile_time:.3f} s)")
-    if args.out:
+    if args.out is not None:
         from vibro.provenance import record, write_sidecar
 
         write_csv_atomically(df, args.out)
-        settings = {"backend": res.backend, "rtol": args.rtol, "x0": args.x0, "v0": args.v0, "t_end": args.t_end,
+        settings = {"backend": res.backend, "rtol": args.rtol, "x0": x0, "v0": v0, "t_end": args.t_end,
                     "max_impacts": args.max_impacts, "max_steps": args.max_steps}
         results = {"status": res.status, "message": res.message, "impacts": res.n_impacts, "steps": res.n_steps,
                    "wall_time_s": res.wall_time}
@@ -167,10 +200,12 @@ def run(args: argparse.Namespace) -> int:
     except ModelError as exc:  # asymmetric barriers: no single impact level for eqs. 11-14
         print(f"no comparison with eqs. 11-14: {exc}")
         return 0 if res.status in ("ok", "max_impacts") else 1
-    H0 = float(model.energy(args.x0, args.v0))
+    H0 = float(model.energy(x0, v0))
     print(f"G(delta) = {Gd:.12g}, H0 = {H0:.12g}")
     if len(df) == 0:
-        if H0 < Gd:
+        if H0 == 0.0:
+            print("no impacts: the orbit starts at rest at the equilibrium (H0 = 0), where it stays")
+        elif H0 < Gd:
             print(f"no impacts: H0 < G(delta); free period (eq. 8) T(H0) = {float(period(model, H0)[0]):.12g}")
         else:
             print("no impacts before t_end")

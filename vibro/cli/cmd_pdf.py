@@ -95,6 +95,12 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--joint-points {args.joint_points} makes a {args.joint_points}^2 grid needing about "
                              f"{args.joint_points**2 * _BYTES_PER_CELL / 2**30:.3g} GiB plus a CSV line per cell; use "
                              f"at most {int(_MAX_JOINT_CELLS**0.5)}")
+    from hybrid.io import OutputPlan
+
+    plan = OutputPlan()  # checked before the work: a bad path costs nothing
+    plan.file(args.out, "--out", sidecar=True)
+    if args.joint is not None:
+        plan.file(args.joint, "--joint")
     model = model_from_args(args)
     if args.equations is not None:
         from averaging import averaging_equations
@@ -128,19 +134,16 @@ def run(args: argparse.Namespace) -> int:
             raise ModelError(f"{refusal}; use --method fpk or vibro mc, or --force to compute it anyway")
         if refusal:
             warnings.warn(f"--force: {refusal}", VibroWarning, stacklevel=2)
-    try:
-        atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
-        if args.joint is not None:
-            left, right = model.barriers
-            lo, hi = (float(v[0]) for v in turning_points(model, args.h_max))
-            x = np.linspace(max(left, lo), min(right, hi), args.joint_points)
-            ymax = np.sqrt(2.0 * args.h_max)
-            y = np.linspace(-ymax, ymax, args.joint_points)
-            pxy = sd.joint(x, y)
-            X, Y = np.meshgrid(x, y)
-            atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
-    except OSError as exc:
-        raise ParameterError(f"cannot write output: {exc}") from exc
+    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    if args.joint is not None:
+        left, right = model.barriers
+        lo, hi = (float(v[0]) for v in turning_points(model, args.h_max))
+        x = np.linspace(max(left, lo), min(right, hi), args.joint_points)
+        ymax = np.sqrt(2.0 * args.h_max)
+        y = np.linspace(-ymax, ymax, args.joint_points)
+        pxy = sd.joint(x, y)
+        X, Y = np.meshgrid(x, y)
+        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
     from averaging.quadrature import geometry
 
     Gd = geometry(model).G_delta  # the lowest impact level (inf without walls)

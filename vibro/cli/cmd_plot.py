@@ -38,7 +38,18 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     """Draw the files; bad input raises a VibroError (exit status 2)."""
+    from pathlib import Path
+
+    from hybrid.io import OutputPlan
+    from vibro.provenance import sidecar_path
     from vibro.studies.plots import plot_files
+
+    plan = OutputPlan()  # the picture must not replace a file it draws (or the sidecar it reads)
+    for name in dict.fromkeys(args.files):
+        plan.reads(name, repr(name))
+        if sidecar_path(name) != Path(name):
+            plan.reads(sidecar_path(name), f"sidecar {str(sidecar_path(name))!r}")
+    plan.file(args.out, "--out")
 
     plot_files(args.files, args.out, labels=args.labels, barrier_energy=args.barrier_energy,
                barriers=None if args.barriers is None else tuple(args.barriers), title=args.title, dpi=args.dpi)

@@ -52,6 +52,10 @@ def run(args) -> int:
     from .common import model_from_args
 
     check_request(args.tol, args.max_cost)  # before any output: bad input gives one line
+    if args.out is not None:
+        from hybrid.io import OutputPlan
+
+        OutputPlan().file(args.out, "--out", sidecar=True)
     model = model_from_args(args)
     print(f"model: {model!r}")
     if args.dry_run:
@@ -73,7 +77,7 @@ def run(args) -> int:
     print(sol.summary())
     preds = ", ".join(f"{k} {v:.3g}" for k, v in sol.choice.predictions.items())
     print(f"predicted L1 of the candidates: {preds}")
-    if args.out:
+    if args.out is not None:
         from hybrid.io import write_csv_atomically
         from vibro.provenance import record, write_sidecar
 

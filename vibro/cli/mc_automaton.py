@@ -202,7 +202,7 @@ def scheme_for(args, automaton, oscillator: bool) -> str:
     return mapped
 
 
-def run(args, resolved) -> int:
+def run(args, resolved, plan) -> int:
     """Simulate the automaton, print the summary, write the CSV files, the sidecar and ``--summary-json``."""
     import numpy as np
     import pandas as pd
@@ -225,6 +225,15 @@ def run(args, resolved) -> int:
         raise ParameterError("--phases needs a forced oscillator model (duffing-forced, or forcing= in a model file); "
                              "for an automaton call simulate_automaton(..., phases=N, period=T) from Python")
     obs, hist = _choose_observables(args, automaton)
+    out = Path(args.out)
+    first = "H" if "H" in obs else next(iter(obs))
+    extra = {name: out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}") for name in obs if name != first}
+    if automaton.transitions:
+        extra["transitions"] = out.with_name(f"{out.stem}_transitions{out.suffix or '.csv'}")
+    if args.events:
+        extra["events"] = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
+    for name, path in extra.items():  # the files named after --out, checked before the run
+        plan.file(path, f"the {name} file of --out")
     n = len(automaton.states)
     x0 = tuple(args.x0) if args.x0 is not None else (0.0,) * n
     if len(x0) != n:
@@ -260,8 +269,6 @@ def run(args, resolved) -> int:
         print(f"vibro mc: warning: {text}", file=sys.stderr)
 
     names = list(ens.names)
-    first = "H" if "H" in names else names[0]
-    out = Path(args.out)
     files = [out]
     frame = _histogram_frame(ens, first)
     atomic_write_text(out, frame.to_csv(index=False, float_format="%.17g"))
