@@ -45,8 +45,14 @@ def _reason(exc: OSError) -> str:
     return exc.strerror or type(exc).__name__
 
 
+def _shown(path) -> str:
+    """A path as a message shows it: a very long one is cut in its middle, so that the reason after it survives."""
+    text = str(path)
+    return repr(text) if len(text) <= 100 else repr(f"{text[:40]}...{text[-40:]}")
+
+
 def _describe(path, label: str | None) -> str:
-    return f"{label} {str(path)!r}" if label else repr(str(path))
+    return f"{label} {_shown(path)}" if label else _shown(path)
 
 
 def check_output_file(path, label: str | None = None) -> Path:
@@ -87,7 +93,7 @@ def check_output_file(path, label: str | None = None) -> Path:
         raise OutputError(f"{where}: the name is {len(os.fsencode(path.name))} bytes long, above the file system's "
                           f"limit of {limit}; give a shorter name")
     if not folder.is_dir():
-        raise OutputError(f"{where}: folder {str(folder)!r} does not exist; create it first")
+        raise OutputError(f"{where}: folder {_shown(folder)} does not exist; create it first")
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
@@ -109,7 +115,7 @@ def _probe_folder(folder: Path, path: Path, where: str) -> None:
     try:
         fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     except OSError as exc:
-        raise OutputError(f"{where}: no file can be created in {str(folder)!r} ({_reason(exc)}); choose a writable "
+        raise OutputError(f"{where}: no file can be created in {_shown(folder)} ({_reason(exc)}); choose a writable "
                           "folder") from exc
     os.close(fd)
     try:
@@ -163,10 +169,10 @@ class OutputPlan:
     >>> d = tempfile.mkdtemp()
     >>> plan = OutputPlan()
     >>> _ = plan.file(os.path.join(d, "h.csv"), "--out", sidecar=True)
-    >>> plan.file(os.path.join(d, "h.json"), "--summary-json")
+    >>> plan.file(os.path.join(d, "h.json"), "--summary-json")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    hybrid.errors.OutputError: --summary-json and the provenance sidecar of --out are one file (h.json); give them different names
+    hybrid.errors.OutputError: --summary-json and the provenance sidecar of --out are one file (h.json); give ...
     """
 
     def __init__(self):
@@ -188,7 +194,7 @@ class OutputPlan:
         if sidecar:
             side = path.with_suffix(".json")
             if os.path.realpath(side) == os.path.realpath(path):
-                raise OutputError(f"{label} {str(path)!r} would be overwritten by its own provenance sidecar "
+                raise OutputError(f"{label} {_shown(path)} would be overwritten by its own provenance sidecar "
                                   f"{side.name}; give it another suffix, e.g. .csv")
             check_output_file(side, f"the provenance sidecar of {label}")
             self._claim(side, f"the provenance sidecar of {label}")
@@ -232,16 +238,16 @@ def atomic_write(path, write: Callable[[str], None]) -> Path:
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise OutputError(f"cannot write {str(path)!r}: folder {str(folder)!r} does not exist")
+        raise OutputError(f"cannot write {_shown(path)}: folder {_shown(folder)} does not exist")
     if path.is_dir():
-        raise OutputError(f"cannot write {str(path)!r}: it is a directory")
+        raise OutputError(f"cannot write {_shown(path)}: it is a directory")
     # a unique hidden name created with O_EXCL: the file gets the usual permissions (0666 minus the umask), which
     # mkstemp's 0600 would not give
     tmp = str(folder / _temporary_name(path))
     try:
         os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
     except OSError as exc:
-        raise OutputError(f"cannot write {str(path)!r}: {_reason(exc)}") from exc
+        raise OutputError(f"cannot write {_shown(path)}: {_reason(exc)}") from exc
     try:
         write(tmp)
         os.replace(tmp, path)
@@ -249,7 +255,7 @@ def atomic_write(path, write: Callable[[str], None]) -> Path:
         if os.path.exists(tmp):
             os.unlink(tmp)
         if isinstance(exc, OSError) or _is_disk_error(exc):
-            raise OutputError(f"cannot write {str(path)!r}: {_disk_reason(exc)}; nothing was written") from exc
+            raise OutputError(f"cannot write {_shown(path)}: {_disk_reason(exc)}; nothing was written") from exc
         raise
     return path
 

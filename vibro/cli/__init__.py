@@ -231,7 +231,7 @@ def flag_names(message: str, parser: argparse.ArgumentParser, command: str) -> s
 
 def _one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
-    return text if len(text) <= 400 else text[:397] + "..."
+    return text if len(text) <= 600 else f"{text[:300]} ... {text[-290:]}"
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,7 +36,6 @@ def run(args) -> int:
     import time
 
     from hybrid.errors import ParameterError
-
     from hybrid.io import check_output_dir
 
     check_output_dir(args.out_dir, "--out-dir")

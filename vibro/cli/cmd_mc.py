@@ -82,7 +82,6 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     """Run the ensemble described by ``args``; print the summary; write the CSV files."""
-    from pathlib import Path
 
     from hybrid.stochastic import atomic_write_text, simulate_ensemble
     from vibro.provenance import record, write_sidecar

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from hybrid.errors import ModelError, ParameterError
 
-
 DEFAULT_STATE = (0.0, 2.2)
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hybrid.errors import ParameterError
+from hybrid.errors import ParameterError, VibroWarning
 from hybrid.io import atomic_write
 
 FONT_PT = 9.0
@@ -162,6 +162,7 @@ def read_table(path, label: str | None = None) -> Table:
         raise ParameterError(f"{path.name}: {exc}") from None
     if len(frame) == 0:
         raise ParameterError(f"{path.name}: no rows to plot")
+    frame = _finite_rows(frame, KINDS[kind], path.name)
     meta = sidecar_of(path)
     g = _find(meta, ("barrier_energy", "G_delta", "g_barrier"))
     bars = _find(meta, ("barriers",))
@@ -170,6 +171,32 @@ def read_table(path, label: str | None = None) -> Table:
         bars = None if delta is None else (-float(delta), float(delta))
     return Table(path, kind, frame, label or path.stem, None if g is None else float(g),
                  None if bars is None else (float(bars[0]), float(bars[1])), meta)
+
+
+def _finite_rows(frame, columns, name: str):
+    """The rows whose numbers in ``columns`` are all finite; text there is refused, dropped rows are counted in a
+    warning (other columns, such as an impact log's ``barrier``, are kept as they are)."""
+    import warnings
+
+    import pandas as pd
+
+    frame = frame.rename(columns=lambda c: str(c).strip())
+    columns = list(columns)
+    numeric = frame[columns].apply(pd.to_numeric, errors="coerce")
+    text = numeric.isna() & frame[columns].notna()
+    if text.to_numpy().any():
+        column = columns[int(np.argmax(text.any().to_numpy()))]
+        raise ParameterError(f"{name}: column {column!r} holds text where numbers belong (first at row "
+                             f"{int(np.argmax(text[column].to_numpy())) + 2})")
+    finite = np.isfinite(numeric.to_numpy(dtype=float)).all(axis=1)
+    if not finite.any():
+        raise ParameterError(f"{name}: no row holds only finite numbers (NaN or infinite values); nothing to plot")
+    if not finite.all():
+        warnings.warn(f"{name}: {int((~finite).sum())} of {len(frame)} rows hold NaN or infinite values and are "
+                      "left out of the plot", VibroWarning, stacklevel=3)
+    frame = frame.copy()
+    frame[columns] = numeric
+    return frame[finite].reset_index(drop=True)
 
 
 def _figure(width, height):
