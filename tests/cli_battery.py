@@ -85,9 +85,12 @@ class Outcome:
 
 def _numeric_options():
     """(command, option, nargs) of every option of the commands in BASE whose type is int or float."""
-    from vibro.cli import build_parser, checked_float, checked_int
+    import vibro.cli
+    from vibro.cli import build_parser
 
     parser = build_parser()
+    checked_int = getattr(vibro.cli, "checked_int", int)  # absent before issue 24: the battery also rates old builds
+    checked_float = getattr(vibro.cli, "checked_float", float)
     sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
     out = []
     for command in dict.fromkeys(k.split("-")[0] for k in BASE):

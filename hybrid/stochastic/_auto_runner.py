@@ -521,7 +521,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         raise ParameterError(f"t_burn={t_burn!r} must lie in [0, t_end={t_end!r}) so that something is sampled")
     paths = _as_int("paths", paths)
     stride = _as_int("stride", stride)
-    chunk_paths = _as_int("chunk_paths", chunk_paths)
+    # one chunk holds every path when chunk_paths >= paths: same numbers, no arrays sized for absent paths
+    chunk_paths = min(_as_int("chunk_paths", chunk_paths), paths)
     checkpoint_every = _as_int("checkpoint_every", checkpoint_every)
     dt_requested, phase_steps = dt, 1
     phases = _as_count("phases", phases, "0: no phase sections")

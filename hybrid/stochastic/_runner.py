@@ -310,6 +310,7 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
     stride = _positive_int("stride", stride)
     v_bins = _positive_int("v_bins", v_bins)
     chunk_paths = default_chunk_paths(paths) if chunk_paths is None else _positive_int("chunk_paths", chunk_paths)
+    chunk_paths = min(chunk_paths, paths)  # one chunk holds every path: same numbers, no arrays for absent paths
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed={seed!r} must be a non-negative integer (randomness only from explicit seeds)")
     if xy_bins is not None:

@@ -53,6 +53,8 @@ class Estimate:
 
     def __format__(self, spec: str) -> str:
         spec = spec or ".6g"
+        if not math.isfinite(self.ci):  # one batch: no interval, said in words rather than "± inf"
+            return f"{self.value:{spec}} (no CI: {self.batches} batch{'es' if self.batches != 1 else ''})"
         return f"{self.value:{spec}} ± {self.ci:{spec}}"
 
     def __str__(self) -> str:

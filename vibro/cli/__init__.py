@@ -225,7 +225,8 @@ def flag_names(message: str, parser: argparse.ArgumentParser, command: str) -> s
     for action in sub.choices[command]._actions:
         longest = max(action.option_strings, key=len, default="")
         if longest.startswith("--") and action.dest not in ("help", "param"):
-            message = re.sub(rf"(?<![\w.-]){re.escape(action.dest)}=", f"{longest}=", message)
+            # only 'name=value': a hint that already gives both spellings ("max_memory=, --max-memory-gb") stays
+            message = re.sub(rf"(?<![\w.-]){re.escape(action.dest)}=(?=[^\s,;)])", f"{longest}=", message)
     return message
 
 

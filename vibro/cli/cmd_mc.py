@@ -87,6 +87,10 @@ def run(args) -> int:
     from vibro.provenance import record, write_sidecar
 
     plan = plan_outputs(args)  # every path checked before the run, not after it
+    if not (0 < args.max_memory_gb < float("inf")):
+        raise ParameterError(f"--max-memory-gb {args.max_memory_gb:g} must be a positive number of GB")
+    if not 1 <= args.threads_per_block <= 1024:
+        raise ParameterError(f"--threads-per-block {args.threads_per_block} must lie in 1-1024 (a CUDA block)")
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
     resolved = automaton_from_args(args)  # None: an oscillator model without automaton options
@@ -274,7 +278,7 @@ def _run_forced(args, model, started, plan) -> int:
     print(f"  forcing         F = {model.forcing}" + (f", period {period:.10g}" if period else ""))
     print(f"  throughput      {steps / max(ens.wall_time, 1e-9) / 1e6:.1f} M path-steps/s  (wall "
           f"{ens.wall_time:.2f} s)")
-    print(f"  E[H]            {H.value:.6g} ± {H.ci:.2g}   (± = 95% batch-means CI)")
+    print(f"  E[H]            {H:.6g}   (± = 95% batch-means CI)")
     print(f"  impacts/time    {sum(rates.values()):.6g}   ({int(ens.events.sum())} impacts)")
     if ens.flags["outside"]:
         print(f"  WARNING: {ens.flags['outside']} samples lay outside the barriers", file=sys.stderr)

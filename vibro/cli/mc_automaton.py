@@ -322,7 +322,7 @@ def run(args, resolved, plan) -> int:
     print(f"  wall            {ens.wall_time:.2f} s")
     for name in names:
         est = ens.mean(name)
-        print(f"  E[{name}]{' ' * max(1, 12 - len(name))}{est.value:.6g} ± {est.ci:.3g}   (95% batch-means CI; "
+        print(f"  E[{name}]{' ' * max(1, 12 - len(name))}{est:.6g}   (95% batch-means CI; "
               f"{ens.outside_fraction(name):.3g} outside the range)")
     for t in ens.transitions:
         print(f"  rate {t:<10} {ens.rate(t):.6g} per unit time ({int(ens.events[ens.transitions.index(t)])} firings)")
