@@ -154,3 +154,46 @@ def test_paths_that_cannot_take_a_file(target, tmp_path, capsys):
     assert main(["orbit", "--t-end", "5", "--out", target.format(d=tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--out" in err[0], err
+
+
+# ----------------------------------------------------------------------------- the reproducers, items 8 and 9
+
+HUGE = "1" + "0" * 30
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["mc", "--chunk-paths", HUGE, "--out", "{d}/h.csv"], f"--chunk-paths: {HUGE} is too large"),
+    (["orbit", "--max-steps", HUGE], f"--max-steps: {HUGE} is too large"),
+    (["mc", "--max-memory-gb", "0", "--out", "{d}/h.csv"], "--max-memory-gb 0 must be a positive number"),
+    (["orbit", "--max-impacts", "0"], "--max-impacts=0 must be an integer >= 1"),
+    (["orbit", "--x0", "0", "1", "--v0", "2"], "--x0 X V already sets the velocity"),
+    (["orbit", "--x0", "0", "1", "2"], "--x0 gives 3 values"),
+])
+def test_numbers_on_the_command_line_are_refused_by_their_flag(argv, needle, tmp_path, capsys):
+    try:
+        status = main([a.format(d=tmp_path) for a in argv])
+    except SystemExit as exc:  # refused while the command line is read
+        status = exc.code
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_orbit_state_has_the_spelling_of_mc(capsys):
+    assert main(["orbit", "--x0", "0", "0", "--t-end", "3"]) == 0  # from rest: no impact, no traceback
+    assert "starts at rest" in capsys.readouterr().out
+    assert main(["orbit", "--x0", "0.1", "1.5", "--t-end", "3", "--rows", "1"]) == 0
+    assert "H0 = 1.13" in capsys.readouterr().out  # 1.5^2/2 + 0.1^2/2 + 0.2 * 0.1^4/4
+
+
+def test_plot_of_a_csv_with_nan(tmp_path, capsys):
+    some = tmp_path / "some.csv"
+    some.write_text("H,p\n0,0.5\n0.5,nan\n1,1\n2,inf\n3,0.2\n")
+    assert main(["plot", str(some), "--out", str(tmp_path / "some.png")]) == 0
+    assert "2 of 5 rows hold NaN or infinite values" in capsys.readouterr().err
+    none = tmp_path / "none.csv"
+    none.write_text("H,p\n0,nan\n1,nan\n")
+    assert main(["plot", str(none), "--out", str(tmp_path / "none.png")]) == 2
+    assert "no row holds only finite numbers" in capsys.readouterr().err
+    assert not (tmp_path / "none.png").exists()
