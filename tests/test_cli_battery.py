@@ -14,7 +14,7 @@ from pathlib import Path
 
 import cli_battery
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 import hybrid.io
@@ -29,7 +29,12 @@ def _check(outcome):
     assert outcome.kind not in BAD_KINDS, (outcome.kind, outcome.case.argv, outcome.detail, outcome.stderr[-2000:])
 
 
-@settings(max_examples=30, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+# no shrinking: a case is one process run, and the report names the failing command line already
+QUICK = {"deadline": None, "derandomize": True, "suppress_health_check": list(HealthCheck),
+         "phases": (Phase.explicit, Phase.generate)}
+
+
+@settings(max_examples=16, **QUICK)
 @given(case=st.sampled_from(CHEAP))
 def test_hostile_numbers_and_paths_are_refused_or_answered(case):
     _check(cli_battery.run_case(case, timeout=60.0))
@@ -40,7 +45,7 @@ NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr),
                     st.text(alphabet="0123456789.e+-naif", max_size=8))
 
 
-@settings(max_examples=20, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@settings(max_examples=10, **QUICK)
 @given(option=st.sampled_from([(c, o, n) for c, o, n in cli_battery._numeric_options() if c == "pdf"]),
        value=NUMBERS)
 def test_any_number_to_any_pdf_option(option, value):
