@@ -18,6 +18,15 @@ from pathlib import Path
 PROVENANCE_VERSION = 1
 
 
+def _installed_version(name: str) -> str | None:
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
 def versions() -> dict:
     """Versions of Python, the scientific stack and this package (and the git commit when available).
 
@@ -29,10 +38,8 @@ def versions() -> dict:
     out = {"python": platform.python_version(), "platform": platform.platform()}
     for name in ("numpy", "scipy", "sympy", "numba", "heyoka", "matplotlib", "pandas"):
         module = sys.modules.get(name)
-        if module is None:  # report only what this run used: importing more would cost start-up time
-            out[name] = None
-            continue
-        out[name] = getattr(module, "__version__", None)
+        # a module this run did not import is read from the installed metadata (importing it would cost start-up)
+        out[name] = getattr(module, "__version__", None) if module is not None else _installed_version(name)
     from vibro import __version__
 
     out["vibro-impact"] = __version__
