@@ -258,7 +258,8 @@ class StationaryDensity:
         inside = (H >= 0) & (H <= self.h_support)
         out = np.zeros_like(H)
         if inside.any():
-            Hi = H[inside]
+            # p/T is finite at H = 0 even where p and T both diverge there (nu < 0): take it just above 0
+            Hi = np.maximum(H[inside], 1e-12 * self.h_support)
             out[inside] = np.exp(self._log_density(Hi)) / self.table.period(Hi)
         return out
 

@@ -4,8 +4,8 @@ A density is written either as values at grid nodes (``vibro pdf``: p(H), p(x, y
 or as a histogram (``vibro mc``: counts per bin). Both are resolved when, along every axis, the central
 :data:`CENTRAL_MASS` of the mass spreads over at least :data:`MIN_CELLS` cells, and a sampled density integrates to
 its mass (and to its mean, when one is printed beside it) on its own grid. Where that fails, one
-:class:`~hybrid.errors.DensityResolutionWarning` per axis says where the mass is and what range or cell count would
-resolve it. Non-finite values are refused: no NaN or inf is ever written.
+:class:`~hybrid.errors.DensityResolutionWarning` says where the mass is and what range or cell count would resolve
+it. Non-finite values are refused: no NaN or inf is ever written.
 """
 
 from __future__ import annotations
@@ -113,7 +113,8 @@ def sampled_cell_masses(grids: Sequence, values) -> np.ndarray:
 
 def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, AxisSpread], str],
                   axes: Sequence[str] | None = None, mass: float | None = None, mean: float | None = None,
-                  sampled_on: Sequence | None = None, stacklevel: int = 2) -> bool:
+                  sampled_on: Sequence | None = None, mass_tol: float = INTEGRAL_TOL, refine: str = "",
+                  stacklevel: int = 2) -> bool:
     """Warn unless the density ``what`` is resolved by its grid; True when it is.
 
     Parameters
@@ -133,6 +134,11 @@ def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, Ax
         beside it (both to :data:`INTEGRAL_TOL`; the mean for a one-axis density).
     sampled_on : sequence of arrays, optional
         The grid of a sampled density (its nodes): ``masses`` are then values at the nodes.
+    mass_tol : float
+        Relative tolerance on ``mass`` (a density with jumps inside its grid, such as p(x, y) at the walls, is
+        integrated only to first order in the cell size).
+    refine : str
+        The fix when only the integral or the mean is off (e.g. ``"use --points 8000"``).
 
     Raises
     ------
@@ -160,7 +166,7 @@ def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, Ax
     if sampled_on is not None:
         cells = sampled_cell_masses(sampled_on, values)
         total = float(cells.sum())
-        if mass is not None and not abs(total - mass) <= INTEGRAL_TOL * max(mass, 1e-300):
+        if mass is not None and not abs(total - mass) <= mass_tol * max(mass, 1e-300):
             problems.append(f"{what} integrates to {total:.6g} on its own grid (trapezoid), not {mass:.6g}")
         if mean is not None and total > 0:  # p(H) only: the trapezoid rule on H p, as a reader would apply it
             H = np.asarray(sampled_on[0], dtype=float)
@@ -180,7 +186,7 @@ def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, Ax
             fixes.append(hint(k, s))
     if not problems:
         return True
-    fix = "; ".join(dict.fromkeys(f for f in fixes if f))
+    fix = "; ".join(dict.fromkeys(f for f in fixes if f)) or refine
     warnings.warn("; ".join(problems) + (f": {fix}" if fix else ""), DensityResolutionWarning,
                   stacklevel=stacklevel + 1)
     return False
