@@ -111,7 +111,7 @@ def sampled_cell_masses(grids: Sequence, values) -> np.ndarray:
     return v
 
 
-def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, AxisSpread], str],
+def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[dict[int, AxisSpread]], str],
                   axes: Sequence[str] | None = None, mass: float | None = None, mean: float | None = None,
                   sampled_on: Sequence | None = None, mass_tol: float = INTEGRAL_TOL, refine: str = "",
                   stacklevel: int = 2) -> bool:
@@ -125,7 +125,7 @@ def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, Ax
         Cell edges per axis (a sampled density: its grid nodes).
     masses : array
         Cell masses (a histogram's counts), or, with ``sampled_on``, the density's values at the nodes.
-    hint : callable (axis index, AxisSpread) -> str
+    hint : callable ({axis index: AxisSpread of each unresolved axis}) -> str
         The fix, in the caller's own words and option names (e.g. ``"use --h-max 5.1 or --bins 3200"``).
     axes : sequence of str
         Axis names (default H for one axis, x and y for two).
@@ -152,7 +152,7 @@ def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, Ax
     >>> with warnings.catch_warnings(record=True) as w:
     ...     warnings.simplefilter("always")
     ...     ok = check_density("p(H)", [H], 2 * np.exp(-2 * H), sampled_on=[H], mass=1.0,
-    ...                        hint=lambda k, s: f"use h_max {4 * s.hi:.3g}")
+    ...                        hint=lambda spreads: f"use h_max {4 * spreads[0].hi:.3g}")
     >>> ok, len(w), "integrates to" in str(w[0].message), "use h_max" in str(w[0].message)
     (False, 1, True, True)
     """
@@ -175,18 +175,19 @@ def check_density(what: str, edges: Sequence, masses, *, hint: Callable[[int, Ax
                 problems.append(f"{what} has mean {got:.6g} on its own grid against the printed {mean:.6g}")
     else:
         cells = values
-    fixes = []
+    unresolved = {}
     for k, (e, m) in enumerate(zip(edges, _marginals(np.asarray(cells)))):
         s = axis_spread(e, m)
         if not s.resolved and s.cells:
+            unresolved[k] = s
             where = ("a single cell" if s.cells == 1 else f"{s.cells} of its {s.total_cells} cells")
-            problems.append(f"{what} is not resolved along {axes[k]}: {CENTRAL_MASS:.0%} of its mass lies in "
-                            f"{where} ([{s.lo:.4g}, {s.hi:.4g}] of [{s.start:.4g}, {s.stop:.4g}])"
-                            + (", a point mass or a range far wider than the mass" if s.cells == 1 else ""))
-            fixes.append(hint(k, s))
+            problems.append(f"{'' if len(unresolved) > 1 else what + ' is '}not resolved along {axes[k]}: "
+                            f"{CENTRAL_MASS:.0%} of its mass lies in {where} ([{s.lo:.4g}, {s.hi:.4g}] of "
+                            f"[{s.start:.4g}, {s.stop:.4g}])" + (", a point mass or a range far wider than the mass"
+                                                                 if s.cells == 1 else ""))
     if not problems:
         return True
-    fix = "; ".join(dict.fromkeys(f for f in fixes if f)) or refine
+    fix = (hint(unresolved) if unresolved else "") or refine
     warnings.warn("; ".join(problems) + (f": {fix}" if fix else ""), DensityResolutionWarning,
                   stacklevel=stacklevel + 1)
     return False
