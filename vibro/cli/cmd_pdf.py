@@ -149,6 +149,11 @@ def run(args: argparse.Namespace) -> int:
             raise ModelError(f"{refusal}; use --method fpk or vibro mc, or --force to compute it anyway")
         if refusal:
             warnings.warn(f"--force: {refusal}", VibroWarning, stacklevel=2)
+        if args.method != "chain":  # the a-posteriori check against the chain (warns outside validity)
+            from vibro.solve.choice import averaging_cross_check
+            from vibro.solve.errormodel import predict_averaging_error
+
+            averaging_cross_check(model, sd, predict_averaging_error(args.method, diag))
     _check_resolved(args, sd)
     if args.joint is not None:
         # the box of the energies that carry the mass (h_support <= h_max), not of all of [0, h_max]

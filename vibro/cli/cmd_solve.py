@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -54,6 +55,8 @@ def run(args) -> int:
     check_request(args.tol, args.max_cost)  # before any output: bad input gives one line
     model = model_from_args(args)
     print(f"model: {model!r}")
+    if not any(math.isfinite(v) for v in model.barriers):  # e.g. --param delta=inf: say what the inf means
+        print("walls: none (barriers at infinity: no impacts)")
     if args.dry_run:
         if args.method != "auto":
             raise ParameterError("--dry-run reports the automatic choice; drop --method")
