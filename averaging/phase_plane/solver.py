@@ -344,7 +344,7 @@ def _l1_bins(a: PhaseDensity, b: PhaseDensity, bins: int = L1_BINS) -> float:
     return float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
 
 
-FIT_TAIL = 1e-12
+FIT_TAIL = 1e-8
 """The ring mass left above the range :func:`stationary_density_xy` fits to the density (see ``h_max`` there)."""
 
 
@@ -369,7 +369,7 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     h_max : float
         Upper end of the energy range (reflecting); mass above it is lost, so choose it in the tail. Where all but
         :data:`FIT_TAIL` of the mass lies below h_max / 4, the rings are fitted to the mass instead (solved again on
-        1.5 times that energy, ``h_support``), so a huge h_max does not put the density into the first few rings;
+        1.25 times that energy, ``h_support``), so a huge h_max does not put the density into the first few rings;
         ``H`` then follows :func:`averaging.stationary.output_grid`.
     walls, restitution, points
         See :func:`solve_phase_plane`.
@@ -411,7 +411,7 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
         elif top >= h / 4.0:
             break
         else:
-            h = 1.5 * top
+            h = 1.25 * top
         sd = solve_phase_plane(model, grid, h, walls, restitution, 3)
     if h < h_max:
         sd.h_max = float(h_max)
