@@ -396,8 +396,8 @@ def output_grid(h_mass: float, h_max: float, points: int) -> np.ndarray:
     Examples
     --------
     >>> H = output_grid(20.0, 1e6, 2000)
-    >>> len(H), H[-1], int(np.sum(H <= 20.0))
-    (2000, 1000000.0, 1937)
+    >>> len(H), float(H[-1]), int(np.sum(H <= 20.0))
+    (2000, 1000000.0, 1938)
     """
     if h_mass >= h_max:
         return np.linspace(0.0, h_max, points)

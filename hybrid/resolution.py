@@ -2,10 +2,10 @@
 
 A density is written either as values at grid nodes (``vibro pdf``: p(H), p(x, y)), read with the trapezoid rule,
 or as a histogram (``vibro mc``: counts per bin). Both are resolved when, along every axis, the central
-:data:`CENTRAL_MASS` of the mass spreads over at least :data:`MIN_CELLS` cells, and a sampled density integrates to
-its mass (and to its mean, when one is printed beside it) on its own grid. Where that fails, one
-:class:`~hybrid.errors.DensityResolutionWarning` says where the mass is and what range or cell count would resolve
-it. Non-finite values are refused: no NaN or inf is ever written.
+:data:`CENTRAL_MASS` of the mass spreads over at least :data:`MIN_CELLS` cells (or half of a coarser grid), and a
+sampled density integrates to its mass (and to its mean, when one is printed beside it) on its own grid. Where that
+fails, one :class:`~hybrid.errors.DensityResolutionWarning` says where the mass is and what range or cell count
+would resolve it. Non-finite values are refused: no NaN or inf is ever written.
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ class AxisSpread:
 
     @property
     def resolved(self) -> bool:
-        return self.cells >= min(MIN_CELLS, self.total_cells)
+        """At least :data:`MIN_CELLS` cells across the mass (half the grid, where the grid asked for is coarser)."""
+        return self.cells >= min(MIN_CELLS, max(1, self.total_cells // 2))
 
     def cells_needed(self) -> int:
         """Cells along the axis that would put :data:`MIN_CELLS` (times 2, for margin) across the mass."""
