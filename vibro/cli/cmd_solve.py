@@ -78,7 +78,16 @@ def run(args) -> int:
     print(f"predicted L1 of the candidates: {preds}")
     if args.out:
         from hybrid.io import write_csv_atomically
+        from hybrid.resolution import check_density
         from vibro.provenance import record, write_sidecar
+
+        # the one check of every density written (hybrid.resolution): Monte Carlo writes a histogram's densities
+        if sol.method == "monte-carlo":
+            check_density(f"p(H) in {args.out}", [sol.result.h_edges], sol.result.h_counts,
+                          hint=lambda spreads: "its energy range comes from the diagnostics; use vibro mc --h-max")
+        else:
+            check_density(f"p(H) in {args.out}", [sol.H], sol.p, sampled_on=[sol.H], mass=1.0,
+                          hint=lambda spreads: "", refine="use vibro pdf with more --points")
 
         path = write_csv_atomically(sol.to_pandas(), args.out)
         results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,
