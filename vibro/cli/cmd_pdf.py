@@ -78,12 +78,12 @@ def _check_resolved(args, sd, joint=None) -> None:
             return f"use --h-max {4.0 * spreads[0].hi:.3g} or --points {spreads[0].cells_needed()}"
 
         check_density(f"p(H) in {args.out}", [sd.H], sd.p, sampled_on=[sd.H], mass=1.0, mean=sd.mean_energy,
-                      hint=hint,
-                      refine=f"use --points {4 * args.points}")
+                      hint=hint, refine=f"use --points {4 * args.points}")
         return
     x, y, pxy = joint
     # p(x, y) jumps across the walls and the level h_max inside its box, so the trapezoid rule converges at first
-    # order only (0.5 % at 101 points per axis for fpk): 1 % catches a grid that cannot hold it, not that
+    # order only (0.5 % off at 101 points per axis for fpk): a 1 % tolerance catches a grid that cannot hold the
+    # density without flagging that first-order error
     check_density(f"p(x, y) in {args.joint}", [x, y], pxy.T, sampled_on=[x, y], mass=1.0, mass_tol=1e-2,
                   hint=lambda spreads: f"use --joint-points {max(s.cells_needed() for s in spreads.values())}",
                   refine=f"use --joint-points {4 * args.joint_points}")
