@@ -64,6 +64,15 @@ def test_fpk_fits_its_rings_to_the_mass():
     assert sd.mean_energy == pytest.approx(ref.mean_energy, rel=1e-3)  # Monte Carlo: 0.5020 +- 0.0025
 
 
+# regression: fpk at h_max 1e300 died with an IndexError in the ring grid
+def test_fpk_at_an_absurd_h_max_answers_as_at_a_moderate_one():
+    from averaging.phase_plane import stationary_density_xy
+
+    ref = stationary_density_xy(DuffingImpact(), h_max=1e3, check=False)
+    sd = stationary_density_xy(DuffingImpact(), h_max=1e300, check=False)
+    assert sd.h_support < 20.0 and sd.mean_energy == pytest.approx(ref.mean_energy, rel=1e-3)
+
+
 def test_pdf_cli_csv_and_joint_agree_with_the_printed_moments(tmp_path, capsys):
     out, joint = tmp_path / "p.csv", tmp_path / "j.csv"
     assert main(["pdf", "--h-max", "1e6", "--out", str(out), "--joint", str(joint)]) == 0

@@ -348,6 +348,27 @@ FIT_TAIL = 1e-8
 """The ring mass left above the range :func:`stationary_density_xy` fits to the density (see ``h_max`` there)."""
 
 
+def _first_range(model, h_max: float) -> float:
+    """h_max, or less where the no-impact averaged density p0 has fallen by e**-40 below it (p0 has the heavier
+    tail, so the mass lies below): rings over [0, 1e300] would hold nothing in floating point. Where the averaged
+    coefficients overflow at h_max, the largest range 1e-8 h_max, 1e-16 h_max, ... (to 1e-40 h_max) at which they
+    do not."""
+    from ..chain import _NO_LOSS
+    from ..quadrature import DEFAULT_NODES
+    from ..stationary import _mass_range
+
+    h = h_max
+    for _ in range(6):  # down to 1e-40 h_max; a model the tables cannot average fails at once, and keeps h_max
+        try:
+            with np.errstate(all="ignore"):
+                fit, covered = _mass_range(model, _NO_LOSS, model.restitution, DEFAULT_NODES, h)
+        except (ValueError, ArithmeticError):  # overflow at h (or a model the tables cannot average)
+            h *= 1e-8
+            continue
+        return fit if covered and np.isfinite(fit) and fit > 0 else h
+    return h_max
+
+
 def _mass_energy(sd: PhaseDensity) -> float:
     """The energy (a ring face) below which all but :data:`FIT_TAIL` of the probability lies."""
     above = 1.0 - np.cumsum(sd.ring_mass) / sd.ring_mass.sum()
@@ -401,8 +422,8 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
             model.check_single_well()
         except ModelError as exc:
             raise NormalisationError(f"no stationary density: {exc}") from exc
-    sd = solve_phase_plane(model, grid, h_max, walls, restitution, points)
-    h = float(h_max)
+    h = _first_range(model, float(h_max))
+    sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3)
     for _ in range(16):
         # rings spread over a range far wider than the mass would put it into the first few: solve where it is
         top = _mass_energy(sd)

@@ -98,8 +98,13 @@ def averaging_cross_check(model, sd, predicted: float = math.nan, warn: bool = T
             ref = chain_density(model, h_max=sd.h_max, check=False)
     except (ValueError, ArithmeticError):  # VibroError is a ValueError: no reference, no claim
         return None
-    edges = np.linspace(0.0, sd.h_max, L1_BINS + 1)
-    l1 = float(np.abs(bin_masses(sd.H, sd.p, edges) - bin_masses(ref.H, ref.p, edges)).sum())
+    # both densities from their own accurate interpolants (not the output grid, however coarse), on L1_BINS bins
+    # of the energies that carry the mass (bins over all of a huge h_max would put it into the first)
+    top = min(sd.h_max, max(sd.h_support, ref.h_support))
+    edges = np.linspace(0.0, top, L1_BINS + 1)
+    H = np.linspace(0.0, top, 100 * L1_BINS + 1)
+    H[0] = 1e-9 * top  # p(H) may diverge (integrably) at 0
+    l1 = float(np.abs(bin_masses(H, sd.density(H), edges) - bin_masses(H, ref.density(H), edges)).sum())
     out = CrossCheck(sd.method, sd.mean_energy / ref.mean_energy - 1.0, l1, ref.mean_energy, float(predicted))
     if warn and not out.valid:
         rated = f" (its predicted L1 error is {predicted:.3g})" if math.isfinite(predicted) else ""
