@@ -351,19 +351,18 @@ FIT_TAIL = 1e-8
 def _first_range(model, h_max: float) -> float:
     """h_max, or less where the no-impact averaged density p0 has fallen by e**-40 below it (p0 has the heavier
     tail, so the mass lies below): rings over [0, 1e300] would hold nothing in floating point. Where the averaged
-    coefficients overflow at h_max, the largest range 1e-8 h_max, 1e-16 h_max, ... (to 1e-40 h_max) at which they
-    do not."""
+    coefficients overflow at h_max, the first of sqrt(h_max), h_max**(1/4), ... at which they do not."""
     from ..chain import _NO_LOSS
     from ..quadrature import DEFAULT_NODES
     from ..stationary import _mass_range
 
     h = h_max
-    for _ in range(6):  # down to 1e-40 h_max; a model the tables cannot average fails at once, and keeps h_max
+    for _ in range(10):  # 1e300 -> 1e150 -> ... -> 1e9 -> 1e5 -> 10; a model the tables cannot average keeps h_max
         try:
             with np.errstate(all="ignore"):
                 fit, covered = _mass_range(model, _NO_LOSS, model.restitution, DEFAULT_NODES, h)
         except (ValueError, ArithmeticError):  # overflow at h (or a model the tables cannot average)
-            h *= 1e-8
+            h = float(np.sqrt(h)) if h > 1e8 else h * 1e-4
             continue
         return fit if covered and np.isfinite(fit) and fit > 0 else h
     return h_max
