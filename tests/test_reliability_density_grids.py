@@ -177,3 +177,12 @@ def test_pdf_cli_warns_outside_validity(tmp_path, capsys):
                  str(tmp_path / "p.csv")]) == 0
     err = capsys.readouterr().err
     assert "outside its validity" in err and "--method chain or fpk" in err
+
+
+def test_solve_forced_outside_validity_warns_and_reports_the_measured_error():
+    from vibro.solve import solve
+
+    model = DuffingImpact(delta=0.5, restitution=Newton(0.3))  # Monte Carlo E[H] 0.1314 +- 0.0005; jump 0.1463
+    with pytest.warns(OutsideValidityWarning, match="use method fpk"):
+        sol = solve(model, 0.02, method="jump")
+    assert sol.estimated_error >= sol.choice.expected_error
