@@ -52,7 +52,15 @@ from hybrid.errors import NormalisationError, ParameterError
 from .jump import EnergyChain
 from .methods import ImpactMethod
 from .quadrature import DEFAULT_NODES, geometry
-from .stationary import StationaryDensity, _check_scale, _mass_range, check_confinement, energy_table
+from .stationary import (
+    _LOG_DROP,
+    StationaryDensity,
+    _check_scale,
+    _mass_range,
+    check_confinement,
+    energy_table,
+    output_grid,
+)
 
 DEFAULT_PHASES = 8
 """Clock phases per flight (relative spread of the flight time 1/sqrt(8) = 0.35; extrapolated with 4)."""
@@ -219,6 +227,33 @@ def _solve_chain(ch, period, wall_levels, law, phases):
     return mass, flux
 
 
+def _chain_on(model, h: float, n: int, nodes: int, law, geo, phases: int, extrapolate: bool):
+    """The chain on ``n`` energies of [0, h]: (table, grid, EnergyChain, node masses, wrap flux, flux ratio)."""
+    tab = energy_table(model, h, nodes)
+    grid = np.linspace(0.0, h, n)
+    ch = EnergyChain(tab, grid, _NO_LOSS, law)
+    if geo.walls > 0:
+        period = tab.period(grid)
+        mass, flux = _solve_chain(ch, period, geo.wall_levels, law, phases)
+        if extrapolate:
+            # the error of the flight-time spread is ~ b/K: Richardson with K/2 removes it
+            m2, f2 = _solve_chain(ch, period, geo.wall_levels, law, phases // 2)
+            mass = np.maximum(2.0 * mass - m2, 0.0)
+            flux = np.maximum(2.0 * flux - f2, 0.0)
+            mass /= mass.sum()
+        # wrap flux relative to a uniform clock (1 with elastic impacts), for the impact rate by quadrature
+        uniform = mass * tab.impact_rate(grid)
+        ok = uniform > 0
+        ratio = np.where(ok, flux / np.where(ok, uniform, 1.0), 0.0)
+        if ok.any():  # the cell across the lowest impact level takes the value of its upper node
+            first = int(np.argmax(ok))
+            ratio[:first] = ratio[first]
+    else:  # no walls: no impacts, p0
+        mass = ch.W / ch.W.sum()
+        flux = ratio = np.zeros(n)
+    return tab, grid, ch, mass, flux, ratio
+
+
 def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = DEFAULT_PHASES, *,
                   energies: int = DEFAULT_ENERGIES, extrapolate: bool = True, nodes: int = DEFAULT_NODES,
                   check: bool = True) -> ChainDensity:
@@ -290,28 +325,18 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
             check_confinement(model, _NO_LOSS, h_max, nodes)
         _check_scale(model, _NO_LOSS, nodes)
         h, covered = _mass_range(model, _NO_LOSS, law, nodes, h_max)
-        tab = energy_table(model, h, nodes)
-        grid = np.linspace(0.0, h, n)
-        ch = EnergyChain(tab, grid, _NO_LOSS, law)
-        if impacts:
-            period = tab.period(grid)
-            mass, flux = _solve_chain(ch, period, geo.wall_levels, law, phases)
-            if extrapolate:
-                # the error of the flight-time spread is ~ b/K: Richardson with K/2 removes it
-                m2, f2 = _solve_chain(ch, period, geo.wall_levels, law, phases // 2)
-                mass = np.maximum(2.0 * mass - m2, 0.0)
-                flux = np.maximum(2.0 * flux - f2, 0.0)
-                mass /= mass.sum()
-            # wrap flux relative to a uniform clock (1 with elastic impacts), for the impact rate by quadrature
-            uniform = mass * tab.impact_rate(grid)
-            ok = uniform > 0
-            ratio = np.where(ok, flux / np.where(ok, uniform, 1.0), 0.0)
-            if ok.any():  # the cell across the lowest impact level takes the value of its upper node
-                first = int(np.argmax(ok))
-                ratio[:first] = ratio[first]
-        else:  # no walls: no impacts, p0
-            mass = ch.W / ch.W.sum()
-            flux = ratio = np.zeros(n)
+        tab, grid, ch, mass, flux, ratio = _chain_on(model, h, n, nodes, law, geo, phases, extrapolate)
+        for _ in range(4 if covered and impacts else 0):
+            # the range came from the no-loss p0; the impacts make p fall sooner: fit the chain's grid to p itself
+            dens = mass / np.where(ch.W > 0, ch.W, np.inf)
+            with np.errstate(divide="ignore"):
+                log_r = np.log(dens) + ch.logp0_nodes
+            k = int(np.argmax(log_r))
+            past = np.nonzero(log_r[k:] < log_r[k] - _LOG_DROP)[0]
+            if not past.size or grid[k + past[0]] >= h / 1.5:
+                break
+            h = 1.25 * float(grid[k + past[0]])
+            tab, grid, ch, mass, flux, ratio = _chain_on(model, h, n, nodes, law, geo, phases, extrapolate)
     r = np.where(ch.W > 0, mass / np.where(ch.W > 0, ch.W, 1.0), 0.0)
     Z = float(np.sum(ch.W * r))
     logZ = ch.shift + np.log(Z)
@@ -320,7 +345,7 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
         with np.errstate(divide="ignore"):
             return np.log(np.interp(e, grid, r)) + tab.log_density(e, None, law) - logZ
 
-    H = np.linspace(0.0, h_max, points)
+    H = output_grid(h, h_max, points)
     with np.errstate(divide="ignore"):
         log_p = np.where(H <= h, log_density(np.minimum(H, h)), -np.inf)
     sd = ChainDensity(model, _NO_LOSS, tab, H, log_p, log_density, ch.Hq, ch.wq, h_max=h_max)

@@ -205,6 +205,8 @@ class StationaryDensity:
         self.log_p = log_p
         with np.errstate(over="ignore"):
             self.p = np.exp(log_p)
+        if len(H) > 1 and H[0] == 0.0 and not np.isfinite(self.p[0]):
+            self.p[0] = self._singular_origin_value(float(H[1]), float(self.p[1]), log_density, table)
         self._log_density = log_density
         self._qH = qH
         self._qp = np.exp(log_density(qH)) * qw
@@ -215,6 +217,19 @@ class StationaryDensity:
         self.impact_rate = float(np.sum(self._qp * table.impact_rate(qH)))
         self.total_mass = float(np.sum(self._qp))
         self.tail_density = float(self.p[-1])
+
+    @staticmethod
+    def _singular_origin_value(H1: float, p1: float, log_density, table) -> float:
+        """A finite p[0] where p(H) ~ H**nu diverges at 0 (nu < 0, a potential flatter than quadratic at its minimum).
+
+        It is the value that gives the first trapezoid cell [0, H1] its exact mass (Gauss-Jacobi for the H**nu
+        factor), so that the written density integrates to 1 on its own grid instead of holding inf.
+        """
+        from .jump import cell_quadrature
+
+        _, Hq, wq = cell_quadrature(np.array([0.0, H1]), table.geometry.levels, table.nu)
+        mass = float(np.sum(wq * np.exp(log_density(Hq))))
+        return max(2.0 * mass / H1 - p1, 0.0)
 
     @property
     def barrier_energy(self) -> float:
@@ -243,7 +258,8 @@ class StationaryDensity:
         inside = (H >= 0) & (H <= self.h_support)
         out = np.zeros_like(H)
         if inside.any():
-            Hi = H[inside]
+            # p/T is finite at H = 0 even where p and T both diverge there (nu < 0): take it just above 0
+            Hi = np.maximum(H[inside], 1e-12 * self.h_support)
             out[inside] = np.exp(self._log_density(Hi)) / self.table.period(Hi)
         return out
 
@@ -370,6 +386,25 @@ TAIL_WARN = 1e-3
 _MAX_POINTS = 10_000_000
 
 
+def output_grid(h_mass: float, h_max: float, points: int) -> np.ndarray:
+    """The ``points`` energies from 0 to ``h_max`` that p(H) is written on, placed where its mass is.
+
+    Uniform when the mass reaches h_max; when it ends at ``h_mass`` < h_max (p has fallen by e**-40 there), all
+    but a few of them lie on [0, h_mass], and the rest step geometrically up to h_max over energies where p is 0.
+    A uniform grid over [0, 1e6] would put a density living on [0, 3] into its first cell.
+
+    Examples
+    --------
+    >>> H = output_grid(20.0, 1e6, 2000)
+    >>> len(H), float(H[-1]), int(np.sum(H <= 20.0))
+    (2000, 1000000.0, 1938)
+    """
+    if h_mass >= h_max:
+        return np.linspace(0.0, h_max, points)
+    tail = max(1, min(points // 32, 64))  # enough steps that a log-scale plot of the empty range still reads
+    return np.concatenate([np.linspace(0.0, h_mass, points - tail), np.geomspace(h_mass, h_max, tail + 1)[1:]])
+
+
 def _check_scale(model, m, nodes) -> None:
     """Refuse parameters whose density varies on an energy scale double precision cannot handle (D = 1e-300).
 
@@ -483,8 +518,11 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
     """The stationary energy density p(H) on ``points`` energies in [0, h_max], normalised to 1 there.
 
     The density is computed on the part of [0, h_max] where it carries its mass: above the energy where p has
-    fallen by e**-40 from its peak, ``p`` is 0 on the output grid, so the answer does not depend on h_max once
-    h_max covers the mass (a huge h_max no longer spreads the grid and the quadrature over empty energies).
+    fallen by e**-40 from its peak, ``p`` is 0, so the answer does not depend on h_max once h_max covers the mass
+    (a huge h_max no longer spreads the grid and the quadrature over empty energies), and the output grid
+    (:func:`output_grid`) puts all but a few of its points below that energy, so that ``H``, ``p`` integrate to 1
+    by the trapezoid rule and give the same moments. Where p diverges at H = 0 (p ~ H**nu, nu < 0), ``p[0]`` is
+    the finite value that gives the first cell its exact mass.
 
     Parameters
     ----------
@@ -565,7 +603,7 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
             f"p(H) cannot be computed in double precision for these parameters {dict(model.params)} "
             f"({type(exc).__name__}); its energy scale under- or overflows: use parameters of moderate size"
         ) from exc
-    H = np.linspace(0.0, h_max, points)
+    H = output_grid(h, h_max, points)
     inside = H <= h
     log_p = np.full(points, -np.inf)
     log_p[inside] = log_density(H[inside]) if h < h_max else log_in

@@ -37,6 +37,11 @@ class TruncationWarning(VibroWarning):
     """A result is computed on a truncated range that cuts off a noticeable part of the probability mass."""
 
 
+class DensityResolutionWarning(VibroWarning):
+    """A density is written on a grid or histogram that cannot hold it: its mass sits in a few cells, or it does not
+    integrate to its mass on its own grid (see :mod:`hybrid.resolution`)."""
+
+
 class CheckpointError(ParameterError):
     """A checkpoint cannot be used: unreadable, edited (checksum), or written by another run (fingerprint)."""
 

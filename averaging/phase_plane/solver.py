@@ -12,6 +12,7 @@ from scipy.interpolate import PchipInterpolator
 from hybrid.errors import ModelError, NormalisationError, ParameterError
 from models import X, Y
 
+from ..stationary import output_grid
 from ._core import Coefficients, Discretisation
 from ._grid import RingGrid
 
@@ -59,7 +60,8 @@ class PhaseDensity:
     def __init__(self, model, grid: RingGrid, disc: Discretisation, p, timing, walls):
         self.model = model
         self.grid = grid
-        self.h_max = grid.h_max
+        self.h_max = grid.h_max  # the range asked for (stationary_density_xy may solve on less: h_support)
+        self.h_support = grid.h_max
         self.timing = timing
         self.walls = walls
         c = disc.cell
@@ -80,7 +82,7 @@ class PhaseDensity:
         self.mean_y2 = float(np.sum(self.cell_mass * self.cell_y**2))
         wall_H = [h for h in grid.walls.values()]
         Gw = min(wall_H) if wall_H else np.inf
-        self.prob_below_barrier = float(self._cdf(min(Gw, self.h_max)))
+        self.prob_below_barrier = float(self._cdf(min(Gw, self.h_support)))
         self.impact_rates = {}
         self._impacts = {}
         for side, (rings, cin, _cout, _W) in disc.walls.items():
@@ -105,8 +107,8 @@ class PhaseDensity:
         0.0
         """
         H = np.asarray(H, dtype=float)
-        inside = (H >= 0) & (H <= self.h_max)
-        return np.where(inside, np.maximum(self._pdf(np.clip(H, 0, self.h_max)), 0.0), 0.0)
+        inside = (H >= 0) & (H <= self.h_support)
+        return np.where(inside, np.maximum(self._pdf(np.clip(H, 0, self.h_support)), 0.0), 0.0)
 
     def bin_masses(self, edges):
         """Probability of each energy bin [edges[k], edges[k+1]] (exact ring masses, monotone interpolation).
@@ -118,7 +120,7 @@ class PhaseDensity:
         >>> round(float(sd.bin_masses([0.0, 4.0]).sum()), 12)
         1.0
         """
-        edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_max)
+        edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_support)
         return np.diff(self._cdf(edges))
 
     # ------------------------------------------------------------------ impacts
@@ -178,7 +180,7 @@ class PhaseDensity:
 
     def _x_range(self):
         lo, hi = self.walls
-        tl, tr = self.model.turning_points(self.h_max) if hasattr(self.model, "turning_points") else (-5, 5)
+        tl, tr = self.model.turning_points(self.h_support) if hasattr(self.model, "turning_points") else (-5, 5)
         return (lo if lo is not None else float(tl)), (hi if hi is not None else float(tr))
 
     def marginal_x(self, x, points: int = 801):
@@ -192,7 +194,7 @@ class PhaseDensity:
         True
         """
         x = np.atleast_1d(np.asarray(x, dtype=float))
-        ym = np.sqrt(2.0 * self.h_max)
+        ym = np.sqrt(2.0 * self.h_support)
         e = np.linspace(-ym, ym, points + 1)
         yc = 0.5 * (e[1:] + e[:-1])
         return self.joint(x, yc).sum(axis=0) * (e[1] - e[0])
@@ -229,7 +231,7 @@ class PhaseDensity:
         if x is None:
             x = np.linspace(*self._x_range(), 101)
         if y is None:
-            ym = np.sqrt(2.0 * self.h_max)
+            ym = np.sqrt(2.0 * self.h_support)
             y = np.linspace(-ym, ym, 101)
         XX, YY = np.meshgrid(x, y)
         return pd.DataFrame({"x": XX.ravel(), "y": YY.ravel(), "p": self.joint(x, y).ravel()})
@@ -338,8 +340,39 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
 
 
 def _l1_bins(a: PhaseDensity, b: PhaseDensity, bins: int = L1_BINS) -> float:
-    edges = np.linspace(0.0, a.h_max, bins + 1)
+    edges = np.linspace(0.0, a.h_support, bins + 1)
     return float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
+
+
+FIT_TAIL = 1e-8
+"""The ring mass left above the range :func:`stationary_density_xy` fits to the density (see ``h_max`` there)."""
+
+
+def _first_range(model, h_max: float) -> float:
+    """h_max, or less where the no-impact averaged density p0 has fallen by e**-40 below it (p0 has the heavier
+    tail, so the mass lies below): rings over [0, 1e300] would hold nothing in floating point. Where the averaged
+    coefficients overflow at h_max, the first of sqrt(h_max), h_max**(1/4), ... at which they do not."""
+    from ..chain import _NO_LOSS
+    from ..quadrature import DEFAULT_NODES
+    from ..stationary import _mass_range
+
+    h = h_max
+    for _ in range(10):  # 1e300 -> 1e150 -> ... -> 1e9 -> 1e5 -> 10; a model the tables cannot average keeps h_max
+        try:
+            with np.errstate(all="ignore"):
+                fit, covered = _mass_range(model, _NO_LOSS, model.restitution, DEFAULT_NODES, h)
+        except (ValueError, ArithmeticError):  # overflow at h (or a model the tables cannot average)
+            h = float(np.sqrt(h)) if h > 1e8 else h * 1e-4
+            continue
+        return fit if covered and np.isfinite(fit) and fit > 0 else h
+    return h_max
+
+
+def _mass_energy(sd: PhaseDensity) -> float:
+    """The energy (a ring face) below which all but :data:`FIT_TAIL` of the probability lies."""
+    above = 1.0 - np.cumsum(sd.ring_mass) / sd.ring_mass.sum()
+    k = int(np.argmax(above <= FIT_TAIL)) if np.any(above <= FIT_TAIL) else len(above) - 1
+    return float(sd.grid.H_faces[k + 1])
 
 
 def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls="model", restitution=None,
@@ -354,7 +387,10 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     grid : (int, int)
         (rings in H, angle cells per ring); the cost grows like their product (about 1 s per 30 000 cells).
     h_max : float
-        Upper end of the energy range (reflecting); mass above it is lost, so choose it in the tail.
+        Upper end of the energy range (reflecting); mass above it is lost, so choose it in the tail. Where all but
+        :data:`FIT_TAIL` of the mass lies below h_max / 4, the rings are fitted to the mass instead (solved again on
+        1.25 times that energy, ``h_support``), so a huge h_max does not put the density into the first few rings;
+        ``H`` then follows :func:`averaging.stationary.output_grid`.
     walls, restitution, points
         See :func:`solve_phase_plane`.
     check : bool
@@ -385,7 +421,22 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
             model.check_single_well()
         except ModelError as exc:
             raise NormalisationError(f"no stationary density: {exc}") from exc
-    sd = solve_phase_plane(model, grid, h_max, walls, restitution, points)
+    h = _first_range(model, float(h_max))
+    sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3)
+    for _ in range(16):
+        # rings spread over a range far wider than the mass would put it into the first few: solve where it is
+        top = _mass_energy(sd)
+        if top >= sd.grid.H_faces[-1] and h < h_max:  # shrunk too far: the mass reaches the top
+            h = min(float(h_max), 4.0 * h)
+        elif top >= h / 4.0:
+            break
+        else:
+            h = 1.25 * top
+        sd = solve_phase_plane(model, grid, h, walls, restitution, 3)
+    if h < h_max:
+        sd.h_max = float(h_max)
+        sd.H = output_grid(h, float(h_max), int(points))
+        sd.p = sd.density(sd.H)
     if not check:
         return sd
     rho = sd.ring_mass / sd.grid.dH
@@ -394,11 +445,11 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
             f"p(H) does not decay towards h_max={h_max:g} (p(h_max)/max p = {rho[-1] / rho.max():.2g}): the energy "
             "grows without bound (no confinement) or h_max is far too small; raise h_max or add dissipation"
         )
-    tail = float(sd.ring_mass[sd.grid.H_c > 0.9 * h_max].sum())
+    tail = float(sd.ring_mass[sd.grid.H_c > 0.9 * h].sum())
     if tail > 1e-4:
         warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of [0, h_max={h_max:g}]: raise h_max",
                       GridWarning, stacklevel=2)
-    coarse = solve_phase_plane(model, (max(8, grid[0] // 2), max(16, grid[1] // 2)), h_max, walls, restitution, 3)
+    coarse = solve_phase_plane(model, (max(8, grid[0] // 2), max(16, grid[1] // 2)), h, walls, restitution, 3)
     est = _l1_bins(sd, coarse) / (2.0**order - 1.0)
     sd.error_estimate = est
     if est > tol:

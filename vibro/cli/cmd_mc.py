@@ -19,6 +19,7 @@ import warnings
 
 from hybrid.errors import ParameterError
 from vibro.cli.common import add_model_arguments, model_from_args
+from vibro.cli.density_check import check_energy_histogram, check_xy_histogram
 from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
 from vibro.cli.mc_automaton import automaton_from_args, scheme_for
 from vibro.cli.mc_automaton import run as run_automaton
@@ -118,6 +119,9 @@ def run(args) -> int:
         )
     for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
         print(f"vibro mc: warning: {text}", file=sys.stderr)
+    check_energy_histogram(args.out, stats.h_edges, stats.h_counts, stats.mean_energy.value)
+    if args.joint:
+        check_xy_histogram(args.joint, *stats.xy_edges, stats.xy_counts, stats.mean_energy.value)
     stats.to_csv(args.out)
     if args.joint:
         atomic_write_text(args.joint, stats.joint_to_pandas().to_csv(index=False, float_format="%.17g"))
@@ -237,6 +241,10 @@ def _run_forced(args, model, started, plan) -> int:
         )
     for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
         print(f"vibro mc: warning: {text}", file=sys.stderr)
+    edges, _ = ens.density("H")
+    check_energy_histogram(args.out, edges, ens.counts["H"][1:-1], ens.mean("H").value)
+    if args.joint:
+        check_xy_histogram(args.joint, ens.joint[2], ens.joint[3], ens.joint[4], ens.mean("H").value)
     frame = ens.to_pandas("H").rename(columns={"lo": "H_lo", "hi": "H_hi"})
     atomic_write_text(args.out, frame.to_csv(index=False, float_format="%.17g"))
     written = [args.out]

@@ -68,6 +68,27 @@ def _csv(columns: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _check_resolved(args, sd, joint=None) -> None:
+    """Warn unless the p(H) (or, with ``joint`` = (x, y, p), the p(x, y)) about to be written is resolved by its
+    grid and integrates to 1 there (hybrid.resolution, the one check of every density writer)."""
+    from hybrid.resolution import check_density
+
+    if joint is None:
+        def hint(spreads):
+            return f"use --h-max {4.0 * spreads[0].hi:.3g} or --points {spreads[0].cells_needed()}"
+
+        check_density(f"p(H) in {args.out}", [sd.H], sd.p, sampled_on=[sd.H], mass=1.0, mean=sd.mean_energy,
+                      hint=hint, refine=f"use --points {4 * args.points}")
+        return
+    x, y, pxy = joint
+    # p(x, y) jumps across the walls and the level h_max inside its box, so the trapezoid rule converges at first
+    # order only (0.5 % off at 101 points per axis for fpk): a 1 % tolerance catches a grid that cannot hold the
+    # density without flagging that first-order error
+    check_density(f"p(x, y) in {args.joint}", [x, y], pxy.T, sampled_on=[x, y], mass=1.0, mass_tol=1e-2,
+                  hint=lambda spreads: f"use --joint-points {max(s.cells_needed() for s in spreads.values())}",
+                  refine=f"use --joint-points {4 * args.joint_points}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``vibro pdf``; bad input raises a VibroError (exit status 2)."""
     import time
@@ -134,28 +155,42 @@ def run(args: argparse.Namespace) -> int:
             raise ModelError(f"{refusal}; use --method fpk or vibro mc, or --force to compute it anyway")
         if refusal:
             warnings.warn(f"--force: {refusal}", VibroWarning, stacklevel=2)
-    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+        if args.method != "chain":  # the a-posteriori check against the chain (warns outside validity)
+            from vibro.solve.choice import averaging_cross_check
+            from vibro.solve.errormodel import predict_averaging_error
+
+            averaging_cross_check(model, sd, predict_averaging_error(args.method, diag))
+    _check_resolved(args, sd)
     if args.joint is not None:
+        # the box of the energies that carry the mass (h_support <= h_max), not of all of [0, h_max]
+        h_box = min(args.h_max, sd.h_support)
         left, right = model.barriers
-        lo, hi = (float(v[0]) for v in turning_points(model, args.h_max))
+        lo, hi = (float(v[0]) for v in turning_points(model, h_box))
         x = np.linspace(max(left, lo), min(right, hi), args.joint_points)
-        ymax = np.sqrt(2.0 * args.h_max)
+        ymax = np.sqrt(2.0 * h_box)
         y = np.linspace(-ymax, ymax, args.joint_points)
         pxy = sd.joint(x, y)
+        _check_resolved(args, sd, (x, y, pxy))
         X, Y = np.meshgrid(x, y)
+    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    if args.joint is not None:
         atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
     from averaging.quadrature import geometry
 
     Gd = geometry(model).G_delta  # the lowest impact level (inf without walls)
+    walls = bool(np.isfinite(Gd))
     results = {"mean_energy": sd.mean_energy, "prob_below_barrier": sd.prob_below_barrier, "mean_x2": sd.mean_x2,
-               "impact_rate": sd.impact_rate, "barrier_energy": Gd, "averaging_refusal": refusal}
+               "impact_rate": sd.impact_rate, "barrier_energy": Gd if walls else None, "averaging_refusal": refusal}
     settings = {"method": args.method, "h_max": args.h_max, "points": args.points, "force": args.force}
     if args.method == "fpk":
         settings["grid"] = list(args.grid)
     write_sidecar(args.out, record("pdf", model=model, settings=settings, results=results, started=started))
     print(f"model {model.name} {dict(model.params)} restitution {model.restitution.spec()} method {args.method}")
     print(f"E[H] = {sd.mean_energy:.8g}")
-    print(f"P(H < G(delta)) = {sd.prob_below_barrier:.8g}   (G(delta) = {Gd:.8g})")
+    if walls:
+        print(f"P(H < G(delta)) = {sd.prob_below_barrier:.8g}   (G(delta) = {Gd:.8g})")
+    else:  # no impact level: the probability is 1 by definition and G(delta) has no finite value to print
+        print("no walls: no impacts, P(H < G(delta)) = 1")
     print(f"E[x^2] = {sd.mean_x2:.8g}   impact rate = {sd.impact_rate:.8g}")
     print(f"wrote {args.out} ({len(sd.H)} rows)" + (f" and {args.joint}" if args.joint else "")
           + f"; provenance in {sidecar_path(args.out)}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -58,6 +59,8 @@ def run(args) -> int:
         OutputPlan().file(args.out, "--out", sidecar=True)
     model = model_from_args(args)
     print(f"model: {model!r}")
+    if not any(math.isfinite(v) for v in model.barriers):  # e.g. --param delta=inf: say what the inf means
+        print("walls: none (barriers at infinity: no impacts)")
     if args.dry_run:
         if args.method != "auto":
             raise ParameterError("--dry-run reports the automatic choice; drop --method")
@@ -79,7 +82,16 @@ def run(args) -> int:
     print(f"predicted L1 of the candidates: {preds}")
     if args.out is not None:
         from hybrid.io import write_csv_atomically
+        from hybrid.resolution import check_density
         from vibro.provenance import record, write_sidecar
+
+        # the one check of every density written (hybrid.resolution): Monte Carlo writes a histogram's densities
+        if sol.method == "monte-carlo":
+            check_density(f"p(H) in {args.out}", [sol.result.h_edges], sol.result.h_counts,
+                          hint=lambda spreads: "its energy range comes from the diagnostics; use vibro mc --h-max")
+        else:
+            check_density(f"p(H) in {args.out}", [sol.H], sol.p, sampled_on=[sol.H], mass=1.0,
+                          hint=lambda spreads: "", refine="use vibro pdf with more --points")
 
         path = write_csv_atomically(sol.to_pandas(), args.out)
         results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,

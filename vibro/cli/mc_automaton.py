@@ -212,6 +212,8 @@ def run(args, resolved, plan) -> int:
     from models.automata import describe_automaton
     from vibro.provenance import record, write_sidecar
 
+    from .density_check import check_observable_histogram
+
     automaton, params, base = resolved
     scheme = scheme_for(args, automaton, base is not None and not args.filter)
     if args.joint:
@@ -269,6 +271,11 @@ def run(args, resolved, plan) -> int:
         print(f"vibro mc: warning: {text}", file=sys.stderr)
 
     names = list(ens.names)
+    for name in names:  # the one check of every density written (hybrid.resolution)
+        if name in ens.counts:
+            where = out if name == first else out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
+            check_observable_histogram(where, name, ens.density(name)[0], ens.counts[name][1:-1],
+                                       ens.mean(name).value)
     files = [out]
     frame = _histogram_frame(ens, first)
     atomic_write_text(out, frame.to_csv(index=False, float_format="%.17g"))

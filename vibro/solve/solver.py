@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hybrid.errors import ModelError, ParameterError
+from hybrid.errors import ModelError, ParameterError, VibroWarning
 
 from .choice import Choice, averaging_cost, check_request, choose, mc_choice
 from .diagnostics import diagnose
@@ -117,7 +117,7 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
                               UnmeasuredAccuracyWarning, stacklevel=2)
             elif pred > tol:
                 warnings.warn(f"method={method!r} is predicted to miss tol={tol:g} (expected L1 {pred:.3g})",
-                              stacklevel=2)
+                              VibroWarning, stacklevel=2)
             choice = Choice(method, f"forced by method={method!r}", pred, averaging_cost(), {},
                             choice.predictions, diag)
     h_max = choice.settings.get("h_max", choice.diagnostics.h_max)
@@ -169,8 +169,17 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
         sd = stationary_density_xy(model, h_max=h_max, points=2000)
     else:
         sd = stationary_density(model, method=choice.method, h_max=h_max, points=2000)
+    estimated = choice.expected_error
+    if choice.method in ("paper", "jump"):
+        # a-posteriori check against the impact-to-impact chain: warns outside the method's validity, and the
+        # measured distance (less the chain's own error) bounds the error from below
+        from .choice import CHAIN_L1_ERROR, averaging_cross_check
+
+        cross = averaging_cross_check(model, sd, choice.expected_error,
+                                      remedy="use method fpk (or vibro pdf --method chain)")
+        if cross is not None and not cross.valid:
+            estimated = max(estimated, cross.l1 - CHAIN_L1_ERROR) if math.isfinite(estimated) else cross.l1
     H = np.asarray(sd.H, dtype=float)
     p = np.asarray(sd.p, dtype=float)
-    return Solution(H, p, edges, bin_masses(H, p, edges), choice, time.perf_counter() - t0,
-                    choice.expected_error, sd)
+    return Solution(H, p, edges, bin_masses(H, p, edges), choice, time.perf_counter() - t0, estimated, sd)
 
