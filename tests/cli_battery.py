@@ -52,7 +52,9 @@ PATH_OPTIONS = {
     "orbit": ["--out"], "pdf": ["--out", "--joint"], "solve": ["--out"], "mc": ["--out", "--joint", "--summary-json"],
     "figure": ["--out-dir"], "plot": ["--out"],
 }
-BAD_PATHS = ["/proc/x.csv", "", "adir", "/dev/null", "a" * 300 + ".csv", "missing/x.csv"]
+BAD_PATHS = ["/proc/x.csv", "", "adir", "fifo", "a" * 300 + ".csv", "missing/x.csv"]
+"""``fifo`` is a named pipe made in the case's folder: a special file where the output goes. (Not ``/dev/null``: a
+build that renames its output onto it, as root, replaces the system's device with a regular file.)"""
 
 COLLISIONS = [
     ["pdf", "--method", "jump", "--points", "300", "--out", "p.csv", "--joint", "p.csv"],
@@ -173,6 +175,7 @@ def run_case(case: Case, timeout: float = 30.0) -> Outcome:
 
     folder = Path(tempfile.mkdtemp(prefix="vibro-battery-"))
     (folder / "adir").mkdir()
+    os.mkfifo(folder / "fifo")
     (folder / "in.csv").write_text(PLOT_INPUT)
     err_path = folder / ".stderr"
     out_path = folder / ".stdout"
@@ -217,7 +220,7 @@ def run_case(case: Case, timeout: float = 30.0) -> Outcome:
     if status == 2:
         errors = [ln for ln in lines if "error:" in ln]
         written = [p.name for p in folder.rglob("*") if p.is_file() and p.name not in ("in.csv", ".stderr",
-                                                                                     ".stdout")]
+                                                                                     ".stdout", "fifo")]
         if len(errors) != 1 or written:
             return Outcome(case, "unclear", status, seconds, f"{len(errors)} error lines, wrote {written}", stderr)
         # a refused option must be named; a refused --param may answer about the model it makes (its damping)
