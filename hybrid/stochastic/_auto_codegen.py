@@ -9,8 +9,14 @@ cached on disk by its hash, like the oscillator kernels.
 Time ``t`` may appear in flows, noise, guards and resets (forcing, moving barriers).
 
 Crossings are located on the step's own interpolant: for ``em`` and ``milstein`` the straight segment from the
-state before to the state after the step; for ``splitting`` and ``symplectic`` the free flight of the positions at
-constant velocity, which *is* the scheme's position update, so the location is exact for guards of the positions.
+state before to the state after the step; for ``splitting``, ``symplectic`` and ``baoab`` the free flight of the
+positions at constant velocity, which *is* the scheme's position update, so the location is exact for guards of the
+positions. These three also move the velocities in sub-steps of their own at a fixed position and instant (kicks,
+noise, the velocities' Milstein step, BAOAB's O step); where a guard depends on a velocity (an energy level), its
+crossings there are located on the straight line in the velocities from the state before the sub-step to the state
+after it (``velocity_leg``), and the fast step reads such a guard after every sub-step, so that a kick that crosses
+it and a flight that crosses back are not missed. Only then does the source contain that code: the kernels of
+models whose guards are of the positions and time only are those they were, to the byte.
 A root is bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative
 tolerance of 1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at
 most ``MAX_EVENTS`` of them; the excess is counted and reported.
@@ -1013,6 +1019,9 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 '''
 
 
+# event_step's pieces: the sub-steps that move the velocities only (the opening kick or Milstein step, BAOAB's O step,
+# the closing noise and kick), as they are where no guard depends on a velocity (no crossing can happen in them), and
+# the firing of a transition (shared with velocity_leg)
 _PLAIN_OPENING = """\
 if SCHEME == 2:
     # kick: velocities by half the drift
