@@ -9,8 +9,14 @@ cached on disk by its hash, like the oscillator kernels.
 Time ``t`` may appear in flows, noise, guards and resets (forcing, moving barriers).
 
 Crossings are located on the step's own interpolant: for ``em`` and ``milstein`` the straight segment from the
-state before to the state after the step; for ``splitting`` and ``symplectic`` the free flight of the positions at
-constant velocity, which *is* the scheme's position update, so the location is exact for guards of the positions.
+state before to the state after the step; for ``splitting``, ``symplectic`` and ``baoab`` the free flight of the
+positions at constant velocity, which *is* the scheme's position update, so the location is exact for guards of the
+positions. These three also move the velocities in sub-steps of their own at a fixed position and instant (kicks,
+noise, the velocities' Milstein step, BAOAB's O step); where a guard depends on a velocity (an energy level), its
+crossings there are located on the straight line in the velocities from the state before the sub-step to the state
+after it (``velocity_leg``), and the fast step reads such a guard after every sub-step, so that a kick that crosses
+it and a flight that crosses back are not missed. Only then does the source contain that code: the kernels of
+models whose guards are of the positions and time only are those they were, to the byte.
 A root is bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative
 tolerance of 1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at
 most ``MAX_EVENTS`` of them; the excess is counted and reported.
@@ -272,15 +278,37 @@ def ou_parts(st: AutomatonStructure, k: int) -> list:
     return parts
 
 
+def velocity_guards(st: AutomatonStructure) -> list:
+    """Per transition of ``st``: whether its guard depends on a velocity (a state that is some position's rate).
+
+    The splitting schemes change the velocities in sub-steps of their own, at a fixed position and instant; only
+    these guards can cross zero there.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> from hybrid import HybridAutomaton, Mode, Transition
+    >>> x, v = sp.symbols("x v")
+    >>> wall = Transition("wall", "m", "m", x - 1, 1, (x, -v))
+    >>> level = Transition("level", "m", "m", x**2 + v**2 - 1, 1, (x, v))
+    >>> A = HybridAutomaton((x, v), {}, [Mode("m", (v, -x))], [wall, level])
+    >>> velocity_guards(analyse(A))
+    [False, True]
+    """
+    velocities = {real_symbol(st.states[v]) for _, v in st.pairs}
+    return [bool(sp.sympify(tr.guard).free_symbols & velocities) for tr in st.transitions]
+
+
 def _lg(G, xs, i: int, j: int, k: int):
     """L^j G_ik = sum_l G_lj dG_ik/dx_l, the Milstein coefficient of w_j w_k in the increment of state i."""
     return sum(G[l, j] * sp.diff(G[i, k], xs[l]) for l in range(len(xs)))
 
 
-def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts: list) -> str:
+def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts: list, moved: list) -> str:
     """Straight-line code of one step in mode ``k`` on the scalars ``_x0, _x1, ...`` when no guard may fire.
 
-    ``parts``: BAOAB's ``(v, F, c)`` of the mode (:func:`ou_parts`; empty for the other schemes).
+    ``parts``: BAOAB's ``(v, F, c)`` of the mode (:func:`ou_parts`; empty for the other schemes). ``moved``: per
+    transition, whether the scheme's velocity sub-steps can move its guard (:func:`velocity_guards`).
 
     It computes the end of the step's flight into ``_y*`` and tests the guards leaving the mode there: a
     direction +1 guard still below 0 (-1: above 0) cannot have fired, so the step is committed here with the
@@ -321,26 +349,49 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
     code_t1 = {sp.Symbol("t"): t1}
     to_y = {sp.Symbol(f"_x{i}"): ys[i] for i in range(n)}
     vel = sorted({v for _, v in st.pairs})
-    half = []  # BAOAB's guard values at the half step, g(mid), per transition
+    to_v = {sp.Symbol(f"_x{v}"): ys[v] for v in vel}  # after a velocity sub-step at the start: positions still _x
+    leaving = [j for j, tr in enumerate(st.transitions) if tr.source == st.modes[k]]
+    # guards of the velocities are also read after each sub-step that moves only the velocities (kick, noise, O);
+    # the sub-steps after the flight then run before the test instead of after the commit
+    moving = [j for j in leaving if moved[j]]
+    before = {j: [] for j in leaving}  # the names of a guard's values before the end of the flight, in order
+    later = {j: [] for j in leaving}  # and after it
+    post = []  # the code of the sub-steps after the flight, when a guard of the velocities must see them
+
+    def read(out, tag, which, extra, into):
+        """Append to ``out`` the guard values ``_{tag}{j}`` of the transitions ``which``, recorded in ``into``."""
+        for j in which:
+            block(out, [f"_{tag}{j}"], [st.transitions[j].guard], f"{tag}{j}_", extra)
+            into[j].append(f"_{tag}{j}")
+
+    def closing(targets, exprs, name, tag):
+        """A sub-step ``_y += exprs`` (into ``_{name}*``) at the end of the step: after the commit, or before the
+        test (``post``) and followed by a reading ``_g{name}*`` of the guards of the velocities."""
+        if moving:
+            block(post, [f"_{name}{i}" for i in targets], exprs, tag, {**to_y, **code_t1})
+            post.extend(f"_y{i} = _y{i} + _{name}{i}" for i in targets)
+            read(post, f"g{name}", moving, {**to_y, **code_t1}, later)
+        else:
+            block(commit, [f"_{name}{i}" for i in targets], exprs, tag, code_t1)
+            commit.extend(f"_x{i} += _{name}{i}" for i in targets)
+
     if scheme == "baoab":
         hdt, tm = sp.Symbol("hdt"), sp.Symbol("_tm")
         code_tm = {sp.Symbol("t"): tm}
         lines.append("_tm = t + hdt")
         block(lines, [f"_y{v}" for v, _, _ in parts], [xs[v] + hdt * F for v, F, _ in parts], "a")
+        read(lines, "ga", moving, to_v, before)
         lines.extend(f"_y{q} = _x{q} + hdt * _y{v}" for q, v in st.pairs)
-        for j, tr in enumerate(st.transitions):
-            if tr.source == st.modes[k]:
-                block(lines, [f"_m{j}"], [tr.guard], f"m{j}_", {**to_y, **code_tm})
+        read(lines, "m", leaving, {**to_y, **code_tm}, before)  # the guards at the half step, g(mid)
         for v, _, c in parts:  # O: exact OU step of each velocity at the half step's positions
             names.ou_factors(lines, f"{k}_{v}", sp.sympify(c).xreplace(names.subs).xreplace({**to_y, **code_tm}))
             noise_v = sum(G[v, j] * w[j] for j in range(m) if G[v, j] != 0)
             block(lines, [f"_y{v}"], [sp.Symbol(f"_oa{k}_{v}") * ys[v] + sp.Symbol(f"_oc{k}_{v}") * noise_v], "o",
                   {**to_y, **code_tm})
+        read(lines, "go", moving, {**to_y, **code_tm}, before)
         lines.extend(f"_y{q} = _y{q} + hdt * _y{v}" for q, v in st.pairs)
-        # the closing kick after the commit (it moves no position, so no guard of the positions)
-        block(commit, [f"_k{v}" for v, _, _ in parts], [hdt * F for _, F, _ in parts], "b", code_t1)
-        commit.extend(f"_x{v} += _k{v}" for v, _, _ in parts)
-        half = [j for j, tr in enumerate(st.transitions) if tr.source == st.modes[k]]
+        # the closing kick (it moves no position, so no guard of the positions)
+        closing([v for v, _, _ in parts], [hdt * F for _, F, _ in parts], "k", "b")
     elif scheme in ("em", "milstein"):
         block(lines, [f"_y{i}" for i in range(n)], [xs[i] + increment(i, scheme == "milstein") for i in range(n)],
               "a")
@@ -349,30 +400,26 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
             block(lines, [f"_y{i}" for i in vel], [xs[i] + increment(i, True) for i in vel], "a")
         else:  # splitting: kick, free flight (positions only, at the kicked velocities), noise, kick
             block(lines, [f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
-            # the noise and the closing kick at the end of the step, after the commit (as in the event loop)
+            # the noise and the closing kick at the end of the step (as in the event loop)
             noisy = [i for i in range(n) if any(G[i, j] != 0 for j in range(m))]
-            block(commit, [f"_n{i}" for i in noisy],
-                  [sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0) for i in noisy], "n", code_t1)
-            commit.extend(f"_x{i} += _n{i}" for i in noisy)
-            block(commit, [f"_k{i}" for i in vel], [dt / 2 * f[i] for i in vel], "b", code_t1)
-            commit.extend(f"_x{i} += _k{i}" for i in vel)
+            closing(noisy, [sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0) for i in noisy], "n", "n")
+            closing(vel, [dt / 2 * f[i] for i in vel], "k", "b")
+        read(lines, "ga", moving, to_v, before)
         lines.extend(f"_y{q} = _x{q} + dt * _y{v}" for q, v in st.pairs)
     quiet = ["not track"]  # the conditions under which no guard can have fired in the step
-    for j, tr in enumerate(st.transitions):
-        if tr.source != st.modes[k]:
-            continue
-        block(lines, [f"_g{j}"], [tr.guard], f"g{j}_", {**to_y, **code_t1})
-        d = int(tr.direction)
+    for j in leaving:
+        block(lines, [f"_g{j}"], [st.transitions[j].guard], f"g{j}_", {**to_y, **code_t1})
+        values = before[j] + [f"_g{j}"] + later[j]  # a guard's values after each sub-step that moves it
+        d = int(st.transitions[j].direction)
         if d > 0:
-            quiet.extend([f"_m{j} < 0.0"] * (j in half) + [f"_g{j} < 0.0"])
+            quiet.extend(f"{g} < 0.0" for g in values)
         elif d < 0:
-            quiet.extend([f"_m{j} > 0.0"] * (j in half) + [f"_g{j} > 0.0"])
+            quiet.extend(f"{g} > 0.0" for g in values)
         else:
-            block(lines, [f"_h{j}"], [tr.guard], f"h{j}_")
-            if j in half:
-                quiet.append(f"not crosses(0, _h{j}, _m{j}) and not crosses(0, _m{j}, _g{j})")
-            else:
-                quiet.append(f"not crosses(0, _h{j}, _g{j})")
+            block(lines, [f"_h{j}"], [st.transitions[j].guard], f"h{j}_")
+            chain = [f"_h{j}"] + values
+            quiet.append(" and ".join(f"not crosses(0, {g0}, {g1})" for g0, g1 in zip(chain, chain[1:])))
+    lines.extend(post)
     # one combined test: a single well-predicted branch in the hot loop
     lines.append(f"if {' and '.join(quiet)}:")
     lines.extend("    " + c for c in commit)
@@ -433,6 +480,14 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     funcs += [names.dispatch("bforce", force, "out"), names.dispatch("odamp", damping, "out")]
     obs = list(observables.values())
     funcs.append(names.function("_observe", obs if obs else [sp.Integer(0)], "out"))
+    # the splitting schemes move the velocities in sub-steps of their own (kicks, noise, BAOAB's O step) at a fixed
+    # position and instant: a guard that depends on a velocity is located in those too (only there does the
+    # source differ from that of a model whose guards are of the positions and time only)
+    moved = velocity_guards(st) if scheme in ("splitting", "symplectic", "baoab") else [False] * len(trs)
+    located = any(moved)
+    if located:
+        funcs.append(_VELOCITY_LEG.format(vguards=tuple(int(v) for v in moved),
+                                          fire=textwrap.indent(_FIRE.format(when="t"), " " * 8)))
     # per mode: the transitions leaving it (indices into st.transitions), in priority order
     leaving = [[j for j, tr in enumerate(st.transitions) if tr.source == mode] for mode in st.modes]
     first = [min(ix) if ix else 0 for ix in leaving]
@@ -445,12 +500,10 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     fast = []
     for k in range(len(st.modes)):
         fast.append(f"{'if' if k == 0 else 'elif'} mode == {k}:")
-        fast.append(textwrap.indent(_fast_step(st, names, k, scheme, parts[k]), "    "))
+        fast.append(textwrap.indent(_fast_step(st, names, k, scheme, parts[k], moved), "    "))
     # the fast step's guard tests settle the admissible-set check of a sample, unless the splitting's noise and
     # kick, or BAOAB's closing kick, after the flight move a guard that depends on velocities
-    velocities = {real_symbol(st.states[v]) for _, v in st.pairs}
-    fast_checks_set = scheme not in ("splitting", "baoab") or all(
-        not (sp.sympify(tr.guard).free_symbols & velocities) for tr in st.transitions)
+    fast_checks_set = scheme not in ("splitting", "baoab") or not located
     ind = textwrap.indent
     observe = names.scalar_block("_ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")})
     src = _TEMPLATE.format(
@@ -483,6 +536,10 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
         n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
+        opening=ind(_LOCATED_OPENING if located else _PLAIN_OPENING, " " * 4),
+        fire=ind(_FIRE.format(when="t + best_s * tau"), " " * 12),
+        o_step=ind(_LOCATED_O_STEP if located else _PLAIN_O_STEP, " " * 12),
+        closing=ind(_LOCATED_CLOSING if located else _PLAIN_CLOSING, " " * 4),
         first=tuple(first) + (0,), count=tuple(count) + (0,), targets=tuple(targets) + (0,),
         directions=tuple(directions) + (0,), self_loops=tuple(self_loops) + (0,),
         positions=tuple(positions) + (0,), n_pos=len(positions),
@@ -684,36 +741,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
     L = ws[6 * N + N * M:WORK]
     free_flight = SCHEME >= 2  # a constant of the module: the other schemes' code is never compiled
     t_step = t
-    if SCHEME == 2:
-        # kick: velocities by half the drift
-        drift(mode, x, t, p, f)
-        for k in range(N_POS):
-            x[VEL[k]] += 0.5 * dt * f[VEL[k]]
-    elif SCHEME == 4:
-        # BAOAB: kick by the force (the drift without its damping); half flight, O, half flight below; kick
-        bforce(mode, x, t, p, f)
-        for k in range(N_POS):
-            x[VEL[k]] += 0.5 * dt * f[VEL[k]]
-    elif SCHEME == 3:
-        # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
-        drift(mode, x, t, p, f)
-        noise(mode, x, t, p, G)
-        lgn(mode, x, t, p, L)
-        for kv in range(N_POS):
-            i = VEL[kv]
-            acc = f[i] * dt
-            for k in range(M):
-                acc += G[i * M + k] * dw[k]
-            for jn in range(M):
-                for k in range(M):
-                    prod = dw[jn] * dw[k]
-                    if jn == k:
-                        prod -= dt
-                    acc += 0.5 * L[(i * M + jn) * M + k] * prod
-            xr[i] = acc
-        for kv in range(N_POS):
-            x[VEL[kv]] += xr[VEL[kv]]
-    n_ev = 0
+{opening}
     span = dt / LEGS  # BAOAB flies in two halves with its OU step between them
     for leg in range(LEGS):
         if n_ev >= MAX_EVENTS:  # the first leg overflowed: counted once, the state kept
@@ -774,30 +802,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
                     x[i] = xb[i]
                 break
             interpolate(xa, va, xb, best_s, tau, free_flight, xs)
-            speed = abs(grate(best, xs, t + best_s * tau, p))
-            if not check(best, xs, t + best_s * tau, p):
-                # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
-                if iw[5] == 0:
-                    fw[FW_FBAD] = speed
-                iw[5] += 1
-            k_log = iw[IW_NLOG]
-            if k_log < elog.shape[0]:  # the path's event log (empty unless asked for)
-                elog[k_log, 0] = t + best_s * tau
-                elog[k_log, 1] = best
-                elog[k_log, 2] = speed
-            iw[IW_NLOG] += 1
-            if rec:
-                iw[IW_EVENTS + best] += 1
-                fw[best] += speed
-                vb = speed * v_scale
-                if vb < v_bins:
-                    vhist[best, int(vb)] += 1
-                else:
-                    vhist[best, v_bins] += 1
-            reset(best, xs, t + best_s * tau, p, xr)
-            for i in range(N):
-                x[i] = xr[i]
-            mode = TARGET[best]
+{fire}
             t += best_s * tau
             frac *= 1.0 - best_s
             n_ev += 1
@@ -809,37 +814,9 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
         if SCHEME == 4 and leg == 0:
             # O: the velocities' exact Ornstein-Uhlenbeck step at the positions of the half step
             t = t_step + span  # as the fast step's t + hdt, to the bit
-            odamp(mode, x, t, p, f)
-            noise(mode, x, t, p, G)
-            for kv in range(N_POS):
-                i = VEL[kv]
-                kd = f[i] * dt
-                if abs(kd) < 1e-12:
-                    a = 1.0 - kd
-                    c = 1.0
-                else:
-                    a = math.exp(-kd)
-                    c = math.sqrt(-math.expm1(-2.0 * kd) / (2.0 * kd))
-                acc = 0.0
-                for k in range(M):
-                    acc += G[i * M + k] * dw[k]
-                x[i] = a * x[i] + c * acc
+{o_step}
 
-    if SCHEME == 2:
-        # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
-        noise(mode, x, t_end, p, G)
-        for i in range(N):
-            acc = 0.0
-            for k in range(M):
-                acc += G[i * M + k] * dw[k]
-            x[i] += acc
-        drift(mode, x, t_end, p, f)
-        for k in range(N_POS):
-            x[VEL[k]] += 0.5 * dt * f[VEL[k]]
-    elif SCHEME == 4:
-        bforce(mode, x, t_end, p, f)
-        for k in range(N_POS):
-            x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+{closing}
     return mode
 
 
@@ -1039,4 +1016,248 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
         gstat[j, 3] = max(gstat[j, 3], fw[gs + 3])
 {flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
+'''
+
+
+# event_step's pieces: the sub-steps that move the velocities only (the opening kick or Milstein step, BAOAB's O step,
+# the closing noise and kick), as they are where no guard depends on a velocity (no crossing can happen in them), and
+# the firing of a transition (shared with velocity_leg)
+_PLAIN_OPENING = """\
+if SCHEME == 2:
+    # kick: velocities by half the drift
+    drift(mode, x, t, p, f)
+    for k in range(N_POS):
+        x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+elif SCHEME == 4:
+    # BAOAB: kick by the force (the drift without its damping); half flight, O, half flight below; kick
+    bforce(mode, x, t, p, f)
+    for k in range(N_POS):
+        x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+elif SCHEME == 3:
+    # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
+    drift(mode, x, t, p, f)
+    noise(mode, x, t, p, G)
+    lgn(mode, x, t, p, L)
+    for kv in range(N_POS):
+        i = VEL[kv]
+        acc = f[i] * dt
+        for k in range(M):
+            acc += G[i * M + k] * dw[k]
+        for jn in range(M):
+            for k in range(M):
+                prod = dw[jn] * dw[k]
+                if jn == k:
+                    prod -= dt
+                acc += 0.5 * L[(i * M + jn) * M + k] * prod
+        xr[i] = acc
+    for kv in range(N_POS):
+        x[VEL[kv]] += xr[VEL[kv]]
+n_ev = 0"""
+
+
+_FIRE = """\
+speed = abs(grate(best, xs, {when}, p))
+if not check(best, xs, {when}, p):
+    # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
+    if iw[5] == 0:
+        fw[FW_FBAD] = speed
+    iw[5] += 1
+k_log = iw[IW_NLOG]
+if k_log < elog.shape[0]:  # the path's event log (empty unless asked for)
+    elog[k_log, 0] = {when}
+    elog[k_log, 1] = best
+    elog[k_log, 2] = speed
+iw[IW_NLOG] += 1
+if rec:
+    iw[IW_EVENTS + best] += 1
+    fw[best] += speed
+    vb = speed * v_scale
+    if vb < v_bins:
+        vhist[best, int(vb)] += 1
+    else:
+        vhist[best, v_bins] += 1
+reset(best, xs, {when}, p, xr)
+for i in range(N):
+    x[i] = xr[i]
+mode = TARGET[best]"""
+
+
+_PLAIN_O_STEP = """\
+odamp(mode, x, t, p, f)
+noise(mode, x, t, p, G)
+for kv in range(N_POS):
+    i = VEL[kv]
+    kd = f[i] * dt
+    if abs(kd) < 1e-12:
+        a = 1.0 - kd
+        c = 1.0
+    else:
+        a = math.exp(-kd)
+        c = math.sqrt(-math.expm1(-2.0 * kd) / (2.0 * kd))
+    acc = 0.0
+    for k in range(M):
+        acc += G[i * M + k] * dw[k]
+    x[i] = a * x[i] + c * acc"""
+
+
+_PLAIN_CLOSING = """\
+if SCHEME == 2:
+    # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
+    noise(mode, x, t_end, p, G)
+    for i in range(N):
+        acc = 0.0
+        for k in range(M):
+            acc += G[i * M + k] * dw[k]
+        x[i] += acc
+    drift(mode, x, t_end, p, f)
+    for k in range(N_POS):
+        x[VEL[k]] += 0.5 * dt * f[VEL[k]]
+elif SCHEME == 4:
+    bforce(mode, x, t_end, p, f)
+    for k in range(N_POS):
+        x[VEL[k]] += 0.5 * dt * f[VEL[k]]"""
+
+
+def _velocity_leg_call(kind: str, when: str) -> str:
+    """event_step's call of ``velocity_leg`` for the sub-step ``kind`` at the instant ``when``."""
+    return (f"mode, n_ev = velocity_leg(np.int64({kind}), mode, x, {when}, dt, dw, p, rec, vhist, v_scale, v_bins, "
+            "iw, fw, ws, elog, n_ev)")
+
+
+# the same sub-steps where a guard depends on a velocity: each through velocity_leg, which locates its crossings
+_LOCATED_OPENING = f"""\
+n_ev = np.int64(0)  # np.int64: not literals, so that velocity_leg is compiled once (as for kind)
+if SCHEME == 2:
+    # kick: velocities by half the drift
+    {_velocity_leg_call("KICK", "t")}
+elif SCHEME == 4:
+    # BAOAB: kick by the force (the drift without its damping); half flight, O, half flight below; kick
+    {_velocity_leg_call("FORCE_KICK", "t")}
+elif SCHEME == 3:
+    # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
+    {_velocity_leg_call("MILSTEIN", "t")}"""
+
+
+_LOCATED_O_STEP = _velocity_leg_call("OU", "t")
+
+
+_LOCATED_CLOSING = f"""\
+if SCHEME == 2:
+    # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
+    {_velocity_leg_call("NOISE", "t_end")}
+    {_velocity_leg_call("KICK", "t_end")}
+elif SCHEME == 4:
+    {_velocity_leg_call("FORCE_KICK", "t_end")}"""
+
+
+_VELOCITY_LEG = '''\
+KICK, FORCE_KICK, NOISE, MILSTEIN, OU = 0, 1, 2, 3, 4  # the sub-steps that move the velocities only
+VGUARD = np.array({vguards}, dtype=np.int64)  # 1 where the guard depends on a velocity
+
+
+@nb.njit(cache=CACHE)
+def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, fw, ws, elog, n_ev):
+    """One sub-step of ``x`` that moves the velocities only, at the instant ``t``; returns (mode, events so far).
+
+    kind: KICK (half the drift) or NOISE (G dw) for splitting; MILSTEIN (the velocities' whole Milstein step) for
+    symplectic; FORCE_KICK (half the force) or OU (the exact Ornstein-Uhlenbeck step) for BAOAB. Only a guard of the
+    velocities can cross in it: its crossings are located on the straight line in the velocities from the state
+    before to the state after, the earliest on the line first, and fired as in the flights; the rest of the sub-step
+    then runs from the reset state in its mode, scaled by the share of the line left. Past MAX_EVENTS the sub-step
+    runs without locating.
+    """
+    xa = ws[0:N]
+    xb = ws[2 * N:3 * N]
+    xs = ws[3 * N:4 * N]
+    xr = ws[4 * N:5 * N]
+    f = ws[5 * N:6 * N]
+    G = ws[6 * N:6 * N + N * M]
+    L = ws[6 * N + N * M:WORK]
+    straight = np.bool_(False)  # locate's flight flag: the straight line (np.bool_: not a literal, no 2nd compile)
+    frac = 1.0  # share of the sub-step still to run
+    while True:
+        for i in range(N):
+            xa[i] = x[i]
+            xb[i] = x[i]
+        # the whole sub-step from xa, in the same operations as where no guard depends on a velocity (the scheme
+        # outside: numba compiles only the scheme's own sub-steps, and their callees)
+        if SCHEME == 2:
+            if kind == KICK:
+                drift(mode, xa, t, p, f)
+                for k in range(N_POS):
+                    xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
+            else:
+                noise(mode, xa, t, p, G)
+                for i in range(N):
+                    acc = 0.0
+                    for k in range(M):
+                        acc += G[i * M + k] * dw[k]
+                    xb[i] += acc
+        elif SCHEME == 3:
+            drift(mode, xa, t, p, f)
+            noise(mode, xa, t, p, G)
+            lgn(mode, xa, t, p, L)
+            for kv in range(N_POS):
+                i = VEL[kv]
+                acc = f[i] * dt
+                for k in range(M):
+                    acc += G[i * M + k] * dw[k]
+                for jn in range(M):
+                    for k in range(M):
+                        prod = dw[jn] * dw[k]
+                        if jn == k:
+                            prod -= dt
+                        acc += 0.5 * L[(i * M + jn) * M + k] * prod
+                xb[i] += acc
+        elif kind == FORCE_KICK:
+            bforce(mode, xa, t, p, f)
+            for k in range(N_POS):
+                xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
+        else:
+            odamp(mode, xa, t, p, f)
+            noise(mode, xa, t, p, G)
+            for kv in range(N_POS):
+                i = VEL[kv]
+                kd = f[i] * dt
+                if abs(kd) < 1e-12:
+                    a = 1.0 - kd
+                    c = 1.0
+                else:
+                    a = math.exp(-kd)
+                    c = math.sqrt(-math.expm1(-2.0 * kd) / (2.0 * kd))
+                acc = 0.0
+                for k in range(M):
+                    acc += G[i * M + k] * dw[k]
+                xb[i] = a * xa[i] + c * acc
+        if frac < 1.0:  # after a firing: the share of the line left
+            for i in range(N):
+                xb[i] = xa[i] + frac * (xb[i] - xa[i])
+        if n_ev >= MAX_EVENTS:  # the step overflowed before: no more locating
+            break
+        best = np.int64(-1)
+        best_s = 2.0
+        for jj in range(COUNT[mode]):
+            j = FIRST[mode] + jj
+            if VGUARD[j] == 0:  # a guard of the positions and time only: not moved by this sub-step
+                continue
+            g0 = guard(j, xa, t, p)
+            g1 = guard(j, xb, t, p)
+            if crosses(DIRECTION[j], g0, g1):
+                sj = locate(j, xa, xa, xb, t, 0.0, p, straight, g0, g1, xs)
+                if sj < best_s:
+                    best_s = sj
+                    best = j
+        if best < 0:
+            break
+        interpolate(xa, xa, xb, best_s, 0.0, straight, xs)
+{fire}
+        frac *= 1.0 - best_s
+        n_ev += 1
+        if n_ev >= MAX_EVENTS:  # chattering or Zeno inside one step: keep the state, count it
+            if rec:
+                iw[1] += 1
+            return mode, n_ev
+    for i in range(N):
+        x[i] = xb[i]
+    return mode, n_ev
 '''

@@ -441,7 +441,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Ornstein-Uhlenbeck step, half flight, kick: weak order 2, for velocity drifts F(q, t) - c(q, t) v and
         noise free of the velocities). The last three need every state to be a position (d q/dt = v, no noise)
         or a velocity; they do not pump energy into lightly damped oscillators as the explicit em and milstein
-        do (about dt omega**2 / c).
+        do (about dt omega**2 / c). A guard that depends on a velocity (an energy level) is also located in the
+        sub-steps that move only the velocities (kicks, noise, O step), at their instant.
     dt, paths, t_end, t_burn : float, int, float, float
         Step, number of paths, end time, burn-in before statistics (time starts at 0).
     x0 : sequence of float
