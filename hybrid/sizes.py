@@ -92,7 +92,7 @@ def check_size(what: str, *, work: float = 0.0, work_unit: str = "steps", max_wo
     if max_work is not None and not work <= max_work:
         time = f", about {_duration(work * seconds_per_unit)}" if seconds_per_unit else ""
         hint = work_fix if work_fix is not None else fix
-        raise SizeError(f"{what} needs about {work:.3g} {work_unit}{time}{note}, above the limit {max_work:.3g}"
+        raise SizeError(f"{what} needs about {work:.3g} {work_unit}{time}{note}, above the limit {max_work:.6g}"
                         + (f"; {hint}" if hint else ""))
     if max_memory is not None and not memory <= max_memory:
         hint = memory_fix if memory_fix is not None else fix

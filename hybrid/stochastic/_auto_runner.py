@@ -550,7 +550,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                detail="paths x (t_end / dt)", fix="reduce paths or t_end, raise dt, or pass a larger max_path_steps")
     check_chunk_count(paths, chunk_paths)  # before compiling: each chunk spawns its own stream
     n_log = _as_count("events", events, "the firings kept per path; 0: none")  # (events: the firing counts below)
-    check_size(f"the event log of events={n_log} for {paths} paths", memory=24.0 * paths * n_log, max_memory=MAX_EVENT_LOG_BYTES,
+    check_size(f"the event log of events={n_log} for {paths} paths", memory=24.0 * paths * n_log,
+               max_memory=MAX_EVENT_LOG_BYTES,
                detail="24 bytes per kept firing", fix="keep fewer events per path or run fewer paths")
     values = automaton.resolve_parameters(params)
     n = len(automaton.states)
