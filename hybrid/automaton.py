@@ -49,7 +49,18 @@ def _as_expr(value, where: str) -> sp.Expr:
     if expr.has(sp.zoo, sp.nan, sp.I):
         raise ModelError(f"{where}: {value!r} is not a finite real expression (it contains {expr}); "
                          "use real, finite terms")
+    _refuse_undefined_functions(expr, where)
     return canonical(expr)
+
+
+def _refuse_undefined_functions(expr, where: str) -> None:
+    """An undeclared name called as a function, q(x), is no symbol: refuse it here, not as a NameError at run time."""
+    from sympy.core.function import AppliedUndef
+
+    calls = sorted({str(f.func) for f in expr.atoms(AppliedUndef)})
+    if calls:
+        raise ModelError(f"{where} calls {', '.join(f'{c}(...)' for c in calls)}, which is no known function; use "
+                         "sympy's functions (sqrt, exp, sin, Abs, sign, ...) or declare a parameter and multiply by it")
 
 
 class _RealSymbols(dict):
@@ -251,6 +262,7 @@ class HybridAutomaton:
         n = len(self.states)
 
         def check(expr: sp.Expr, where: str) -> None:
+            _refuse_undefined_functions(expr, where)
             unknown = {str(s) for s in expr.free_symbols} - known
             if unknown:
                 raise ModelError(
@@ -277,6 +289,8 @@ class HybridAutomaton:
                 if end not in mode_names:
                     raise ModelError(f"transition {t.name!r} refers to unknown mode {end!r}; modes: {mode_names}")
             check(t.guard, f"guard of transition {t.name!r}")
+            if t.check is not None:
+                check(t.check, f"check of transition {t.name!r}")
             if t.symbolic_reset:
                 if len(t.reset) != n:
                     raise ModelError(
