@@ -130,7 +130,7 @@ def test_solve_with_tol_1e_9_is_refused_before_the_pilot():
     start = time.perf_counter()
     with pytest.raises(SizeError, match=r"Monte Carlo to tol=1e-09 needs about 3.12e\+23 path-steps") as info:
         solve(DuffingImpact(), 1e-9)  # ran a pilot of 1.3e9 path-steps first
-    assert time.perf_counter() - start < 10.0  # the diagnostics, then the estimate
+    assert time.perf_counter() - start < 5.0  # the diagnostics, then the estimate (no scheme check, no pilot)
     assert "--tol" in str(info.value)
 
 

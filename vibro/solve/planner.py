@@ -95,6 +95,11 @@ def plan_monte_carlo(model, tol, h_max, relaxation_time, max_cost, pilot, seed):
     capped : bool
         True when ``max_cost`` cut the run short of the tolerance.
     """
+    # the largest step any scheme's bias budget allows bounds the work from below: an impossible tolerance is
+    # refused before the schemes are checked against the model (symbolic, seconds)
+    best_dt = min(0.05, max((tol / 3.0 / c) ** (1.0 / scheme_order(s)) for s, c in bias_constants().items()
+                            if s in MC_SCHEMES))
+    check_plan(tol, best_dt, 200.0, 0.0, max_cost)
     scheme = pick_scheme(model)
     p = scheme_order(scheme)
     bias_c = bias_constants()[scheme]
