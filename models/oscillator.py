@@ -221,6 +221,16 @@ class ImpactOscillator:
                 )
         self._check_restoring()
 
+    def _restoring_of_parameters(self):
+        """(parameter names, g as a numpy function of x and those parameters), built once and shared by the copies
+        that :meth:`with_params` makes (each check would otherwise lambdify g again)."""
+        cached = self.__dict__.get("_g_of_parameters")
+        if cached is None:
+            names = sorted(self.params)
+            fn = sp.lambdify([X, *[real_symbol(k) for k in names]], self.g, ["scipy", "numpy"])
+            cached = self.__dict__["_g_of_parameters"] = (names, fn)
+        return cached
+
     def _check_restoring(self, samples: int = 401, reach: float = 50.0) -> None:
         """g must be a finite real number at every admissible x (sampled between the walls, or up to |x| = ``reach``
         on a side without one), and G must grow outwards on a side without a wall, or the motion escapes."""
@@ -228,9 +238,10 @@ class ImpactOscillator:
         lo, hi = max(left, -reach), min(right, reach)
         xs = np.unique(np.concatenate([np.linspace(lo, hi, samples), [0.0]]))
         where = "between the walls" if self.has_barriers else "near the equilibrium"
+        names, g_of = self._restoring_of_parameters()
         try:
             with np.errstate(all="ignore"):
-                gx = self.restoring(xs)
+                gx = np.broadcast_to(np.asarray(g_of(xs, *[self.params[k] for k in names]), dtype=float), xs.shape)
         except Exception as exc:  # the user's expression cannot be evaluated: say where, in one line
             raise ModelError(f"the restoring force g(x) = {self.g} cannot be evaluated on [{lo:g}, {hi:g}] "
                              f"({type(exc).__name__}: {exc})") from exc
