@@ -190,8 +190,8 @@ def estimate_orbit(automaton, model, values, state, mode, t0, t_end, *, backend_
     check_size(what, work=steps, work_unit="integration steps", max_work=max_steps, seconds_per_unit=cost,
                detail=f"{STEPS_PER_RADIAN:g} steps per radian of the flow's fastest rate {rate:.3g}/time on the "
                       "starting level" + (f", ~{cost:.0e} s per step" if cost else ""),
-               fix=(f"shorten t_end to at most {t0 + max_steps / max(rate * STEPS_PER_RADIAN, 1e-300):.3g}, "
-                    "raise max_steps (--max-steps), or make the parameters less stiff"),
+               fix=(f"shorten t_end to at most {t0 + max_steps / max(rate * STEPS_PER_RADIAN, 1e-300):.3g} or "
+                    "raise max_steps (--max-steps)"),
                max_memory=None)
     if dense:
         samples = min(steps, max_steps)
@@ -262,8 +262,9 @@ def simulate_orbit(
         Stop with status ``'max_impacts'`` after this many transitions. Refused when the impact log it allows
         would exceed :data:`MAX_LOG_BYTES`.
     max_steps : int
-        Stop with status ``'max_steps'`` after this many integration steps in all (default 10**7), so that a
-        huge ``t_end`` cannot run unbounded; raise it for long runs.
+        Step budget (default 10**7). An orbit whose estimated steps (:func:`estimate_orbit`) exceed it is refused
+        before any integrator is built, with the estimate; one that reaches it anyway stops with status
+        ``'max_steps'``. Raise it for long runs.
     zeno_window, zeno_rtol : int, float
         Zeno detection: ``zeno_window`` successive ratios r < 1 of inter-impact intervals whose deficits 1 - r
         agree within ``zeno_rtol`` (relative) predict an accumulation t_k + dt_k r / (1 - r); if it falls before
@@ -283,7 +284,9 @@ def simulate_orbit(
     ParameterError
         Non-finite or reversed times, a state of the wrong length, a state outside the gap or past a guard,
         bad tolerances (below what double precision delivers), unknown backend, ``max_impacts`` or ``max_steps``
-        out of range.
+        out of range, a start that crosses the gap faster than ``min_dwell``.
+    SizeError
+        Estimated steps above ``max_steps``, a dense output or an impact log above :data:`MAX_LOG_BYTES`.
     RestitutionError
         For a model: an impact whose applied coefficient e = -v+/v- lies outside (0, 1] (a law that is only
         valid on the grid :meth:`RestitutionLaw.validate` checks); the message gives the speed and e.

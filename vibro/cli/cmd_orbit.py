@@ -43,7 +43,8 @@ def register(subparsers) -> None:
                    help="stop with status max_impacts after this many impacts; bounds the cost, which grows with "
                         "the number of impacts")
     p.add_argument("--max-steps", type=int, default=10_000_000, dest="max_steps",
-                   help="stop after this many integration steps, so a huge --t-end stays bounded")
+                   help="step budget: an orbit estimated above it is refused before it starts (with the estimate), "
+                        "and one that still reaches it stops with status max_steps")
     p.add_argument("--out", default=None, metavar="FILE.csv",
                    help="write the impact log here (atomically; not written if absent)")
     p.add_argument("--rows", type=int, default=6, help="table rows per comparison (default 6)")
