@@ -234,8 +234,8 @@ def run(args, resolved) -> int:
     if isinstance(chunk, int) and chunk >= 1 and args.paths >= 1:  # bad values: simulate_automaton says why
         cells = -(-args.paths // chunk) * len(obs) * (max(b for _, _, b in hist.values()) + 2)
         # one int64 histogram row per chunk and observable
-        check_size("the histograms", memory=cells * 8.0, max_memory=args.max_memory_gb * 1e9,
-                   detail=f"{cells:.3g} counters over the chunks",
+        check_size("the run", memory=cells * 8.0, max_memory=args.max_memory_gb * 1e9,
+                   detail=f"histograms of {cells:.3g} counters over the chunks",
                    fix=f"use fewer bins or larger --chunk-paths, or raise --max-memory-gb {args.max_memory_gb:g}")
     started = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
