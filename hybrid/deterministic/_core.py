@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -114,27 +115,33 @@ def _check_coefficient(model, t, before, after) -> None:
         )
 
 
+@functools.lru_cache(maxsize=64)
+def _jacobian_function(flow: tuple, states: tuple, params: tuple):
+    """The flow's Jacobian as a numpy function of (states, parameters, t), or None when it has none (cached: one
+    symbolic derivative per automaton structure, not per orbit)."""
+    import sympy as sp
+
+    plain = {s: sp.Symbol(s.name) for s in states}
+    args = [plain[s] for s in states] + [sp.Symbol(p) for p in params] + [sp.Symbol("t")]
+    try:
+        jac = sp.Matrix(flow).jacobian(list(states)).xreplace(plain)
+        jac = jac.xreplace({s: sp.Symbol(s.name) for s in jac.free_symbols})
+        return sp.lambdify(args, jac, modules="numpy")
+    except Exception:  # noqa: BLE001 - no Jacobian (an exotic function): no estimate; max_steps still bounds
+        return None
+
+
 def _flow_rates(automaton, mode, points, values, t0) -> float:
     """Largest spectral radius of the flow's Jacobian over ``points`` (1/time): the fastest rate of the motion.
 
     Points where the Jacobian is not finite (a square root at its branch point) are skipped: they say nothing
     about the step size.
     """
-    import sympy as sp
-
-    states = automaton.states
-    flow = sp.Matrix(automaton.mode(mode).flow)
-    if flow.is_zero_matrix:
-        return 0.0
-    plain = {s: sp.Symbol(s.name) for s in states}
-    args = [plain[s] for s in states] + [sp.Symbol(p) for p in automaton.parameters] + [sp.Symbol("t")]
+    n = len(automaton.states)
+    fn = _jacobian_function(tuple(automaton.mode(mode).flow), tuple(automaton.states), tuple(automaton.parameters))
     pars = [values[p] for p in automaton.parameters] + [t0]
     rate = 0.0
-    try:
-        jac = flow.jacobian(list(states)).xreplace(plain)
-        jac = jac.xreplace({s: sp.Symbol(s.name) for s in jac.free_symbols})
-        fn = sp.lambdify(args, jac, modules="numpy")
-    except Exception:  # noqa: BLE001 - no Jacobian (an exotic function): no estimate; max_steps still bounds
+    if fn is None:
         return rate
     with np.errstate(all="ignore"):
         for point in points:
@@ -142,7 +149,7 @@ def _flow_rates(automaton, mode, points, values, t0) -> float:
                 J = np.array(fn(*point, *pars), dtype=float)
             except Exception:  # noqa: BLE001 - e.g. DiracDelta from sign(x) has no numpy form: skip the point
                 continue
-            if J.shape == (len(states), len(states)) and np.all(np.isfinite(J)):
+            if J.shape == (n, n) and np.all(np.isfinite(J)):
                 rate = max(rate, float(np.max(np.abs(np.linalg.eigvals(J)))))
     return rate
 
@@ -169,6 +176,17 @@ def estimate_orbit(automaton, model, values, state, mode, t0, t_end, *, backend_
     The steps are estimated as (t_end - t0) x the flow's fastest rate on the starting energy level (the spectral
     radius of its Jacobian) x :data:`STEPS_PER_RADIAN`. For an oscillator between two walls, a start so fast that it
     crosses the gap in less than ``min_dwell`` is refused too (its first impacts would stop the run as chattering).
+
+    Parameters
+    ----------
+    automaton, model, values : HybridAutomaton, ImpactOscillator or None, dict
+        As :func:`simulate_orbit` resolved them.
+    state, mode, t0, t_end :
+        The checked initial state, mode and time window.
+    backend_cls : type
+        Its ``seconds_per_step`` (if any) turns the estimate into a duration in the message.
+    dense, min_dwell, max_steps :
+        As in :func:`simulate_orbit`.
 
     Returns
     -------
