@@ -217,14 +217,33 @@ def estimate_orbit(automaton, model, values, state, mode, t0, t_end, *, backend_
                    max_memory=MAX_LOG_BYTES, detail=f"{samples:.3g} steps kept",
                    fix="shorten t_end, lower max_steps, or run without dense=True")
     if model is not None:
-        left, right = model.barriers
-        speed = abs(float(state[1]))
-        if np.isfinite(left) and np.isfinite(right) and speed > 0 and (right - left) / speed < min_dwell:
-            raise ParameterError(
-                f"the start v0={speed:g} crosses the gap [{left:g}, {right:g}] in {(right - left) / speed:.3g} time "
-                f"units, less than min_dwell={min_dwell:g}: its first impacts would stop the orbit as chattering; "
-                "start with a speed below {:.3g}".format((right - left) / max(min_dwell, 1e-300)))
+        _check_first_crossing(model, abs(float(state[1])), min_dwell)
     return steps
+
+
+def _check_first_crossing(model, speed, min_dwell) -> None:
+    """Refuse a start so fast that the rebound from the first wall crosses the gap in less than ``min_dwell``.
+
+    At such speeds the flight across the gap is free (its time is far below the oscillation's), so the second
+    impact follows the first after width / (e(v) v): the run would stop there with status 'chattering'.
+    """
+    left, right = model.barriers
+    if not (np.isfinite(left) and np.isfinite(right)) or not speed > 0:
+        return
+    width = right - left
+    if width / speed >= min_dwell:
+        return  # even without losses the first crossing is slow enough
+    try:
+        e = float(np.ravel(model.restitution.coefficient(speed))[0])
+    except (VibroError, ArithmeticError, ValueError, TypeError):
+        e = 1.0
+    rebound = e * speed
+    if rebound > 0 and width / rebound < min_dwell:
+        raise ParameterError(
+            f"the start v0={speed:g} hits a wall at about that speed and rebounds at {rebound:.3g} (e = {e:.3g}), "
+            f"crossing the gap [{left:g}, {right:g}] in {width / rebound:.3g} time units, less than "
+            f"min_dwell={min_dwell:g}: its first impacts would stop the orbit as chattering; start with a smaller "
+            "speed (or lower min_dwell)")
 
 
 def simulate_orbit(
