@@ -18,6 +18,7 @@ the grid needs about 1e+10 cells, above the limit 1e+07; use fewer cells
 from __future__ import annotations
 
 import math
+import numbers
 
 from hybrid.errors import ParameterError
 
@@ -49,13 +50,9 @@ def _duration(seconds: float) -> str:
 
 def check_limit(name: str, value) -> float:
     """``value`` as a positive float limit, or a :class:`ParameterError` naming ``name``."""
-    try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"{name}={value!r} must be a positive number") from exc
-    if isinstance(value, bool) or not out > 0:  # also NaN
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not float(value) > 0:  # also NaN
         raise ParameterError(f"{name}={value!r} must be a positive number")
-    return out
+    return float(value)
 
 
 def check_size(what: str, *, work: float = 0.0, work_unit: str = "steps", max_work: float | None = None,
