@@ -16,6 +16,7 @@ from scipy import sparse
 from scipy.sparse.linalg import splu
 
 from hybrid.errors import ParameterError
+from hybrid.sizes import check_size
 
 from .jump import EnergyChain
 from .methods import get_method
@@ -71,6 +72,24 @@ def _energy_grid(top: float, points, top_name: str) -> np.ndarray:
     if not (np.isfinite(top) and top > 0):
         raise ParameterError(f"{top_name}={top!r} must be a finite positive energy")
     return np.linspace(0.0, float(top), int(points))
+
+
+BYTES_PER_POINT = 400
+"""Memory per energy node of the sparse chain: the grid, about 15 node arrays, the tridiagonal generator in CSR and
+CSC and its LU factors (a low figure: a refused grid is surely too large)."""
+
+
+def _check_grid_size(what: str, points, n_times: int, dense: bool) -> None:
+    """Refuse, before anything is allocated, an energy grid whose arrays exceed :data:`hybrid.sizes.MAX_MEMORY`."""
+    try:
+        n = float(points)
+    except (TypeError, ValueError):
+        return  # not a number: _energy_grid says so
+    memory = n * BYTES_PER_POINT + 16.0 * n * n_times + (16.0 * n * n if dense else 0.0)
+    check_size(f"{what} on points={n:.6g}", memory=memory,
+               detail=(f"{BYTES_PER_POINT} bytes per node" + (f", {n_times} output times" if n_times else "")
+                       + (", two dense N x N matrices for the exact-in-time scheme" if dense else "")),
+               fix="use fewer points" + (", or scheme='implicit-euler' (sparse)" if dense else ""))
 
 
 def _initial_masses(grid, H0):
@@ -171,6 +190,8 @@ def transient_density(model, H0: float, times, method="paper", h_max: float = 4.
     times = np.asarray(times, dtype=float)
     if times.ndim != 1 or not np.all(np.isfinite(times)) or np.any(times < 0) or np.any(np.diff(times) < 0):
         raise ParameterError("times must be a 1-D increasing array of finite values >= 0")
+    dense = scheme == "expm" and not m.jumps  # the reversible chain is diagonalised: N x N eigenvectors
+    _check_grid_size("transient_density", points, len(times), dense)
     grid = _energy_grid(h_max, points, "h_max")
     check_confinement(model, m, h_max, nodes)
     chain = EnergyChain(energy_table(model, h_max, nodes), grid, m, model.restitution)
@@ -215,6 +236,7 @@ def mean_first_passage_time(model, H_c: float, H0=0.0, method="paper", points: i
     """
     m = get_method(method)
     _refuse_flights(m)
+    _check_grid_size("mean_first_passage_time", points, 0, False)
     grid = _energy_grid(H_c, points, "H_c")
     H0a = np.asarray(H0, dtype=float)
     if not np.all((H0a >= 0) & (H0a <= H_c)):  # also refuses NaN

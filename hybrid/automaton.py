@@ -15,7 +15,7 @@ from types import MappingProxyType
 
 import sympy as sp
 
-from .errors import ModelError
+from .errors import ModelError, ParameterError
 
 ResetMap = tuple[sp.Expr, ...] | Callable
 
@@ -49,7 +49,18 @@ def _as_expr(value, where: str) -> sp.Expr:
     if expr.has(sp.zoo, sp.nan, sp.I):
         raise ModelError(f"{where}: {value!r} is not a finite real expression (it contains {expr}); "
                          "use real, finite terms")
+    _refuse_undefined_functions(expr, where)
     return canonical(expr)
+
+
+def _refuse_undefined_functions(expr, where: str) -> None:
+    """An undeclared name called as a function, q(x), is no symbol: refuse it here, not as a NameError at run time."""
+    from sympy.core.function import AppliedUndef
+
+    calls = sorted({str(f.func) for f in expr.atoms(AppliedUndef)})
+    if calls:
+        raise ModelError(f"{where} calls {', '.join(f'{c}(...)' for c in calls)}, which is no known function; use "
+                         "sympy's functions (sqrt, exp, sin, Abs, sign, ...) or declare a parameter and multiply by it")
 
 
 class _RealSymbols(dict):
@@ -182,6 +193,9 @@ class HybridAutomaton:
         Defaults to the first mode.
     observables : mapping of str to sympy expression, optional
         Quantities logged before and after each jump (for example the energy ``H``).
+    positive, nonnegative : sequence of str, optional
+        Parameters that must be > 0 (a gap, a mass) or >= 0 (a damping, a noise temperature); defaults and every
+        override (:meth:`resolve_parameters`) are checked, so a bad value is refused by name before anything runs.
 
     Raises
     ------
@@ -209,8 +223,12 @@ class HybridAutomaton:
     transitions: tuple[Transition, ...] = ()
     initial_mode: str | None = None
     observables: Mapping[str, sp.Expr] = field(default_factory=dict)
+    positive: tuple[str, ...] = ()
+    nonnegative: tuple[str, ...] = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "positive", tuple(self.positive))
+        object.__setattr__(self, "nonnegative", tuple(self.nonnegative))
         object.__setattr__(self, "states", tuple(canonical(sp.sympify(s)) for s in self.states))
         object.__setattr__(self, "modes", tuple(self.modes))
         object.__setattr__(self, "transitions", tuple(self.transitions))
@@ -251,6 +269,7 @@ class HybridAutomaton:
         n = len(self.states)
 
         def check(expr: sp.Expr, where: str) -> None:
+            _refuse_undefined_functions(expr, where)
             unknown = {str(s) for s in expr.free_symbols} - known
             if unknown:
                 raise ModelError(
@@ -277,6 +296,8 @@ class HybridAutomaton:
                 if end not in mode_names:
                     raise ModelError(f"transition {t.name!r} refers to unknown mode {end!r}; modes: {mode_names}")
             check(t.guard, f"guard of transition {t.name!r}")
+            if t.check is not None:
+                check(t.check, f"check of transition {t.name!r}")
             if t.symbolic_reset:
                 if len(t.reset) != n:
                     raise ModelError(
@@ -287,6 +308,22 @@ class HybridAutomaton:
                     check(r, f"reset of transition {t.name!r}")
         for k, v in self.observables.items():
             check(v, f"observable {k!r}")
+        undeclared = sorted(set(self.positive + self.nonnegative) - set(self.parameters))
+        if undeclared:
+            raise ModelError(f"positive/nonnegative name {undeclared}, which are not parameters "
+                             f"{sorted(self.parameters)}")
+        self._check_signs(self.parameters)
+
+    def _check_signs(self, values: Mapping[str, float]) -> None:
+        """Refuse a declared-positive parameter <= 0 or a declared-nonnegative one < 0 (NaN included)."""
+        for k in self.positive:
+            if not values[k] > 0:
+                raise ParameterError(f"{k}={values[k]:g} must be > 0 (declared positive by the automaton); give a "
+                                     "positive value")
+        for k in self.nonnegative:
+            if not values[k] >= 0:
+                raise ParameterError(f"{k}={values[k]:g} must be >= 0 (declared nonnegative by the automaton); give "
+                                     "a value >= 0")
 
     # ------------------------------------------------------------------ access
     def mode(self, name: str) -> Mode:
@@ -321,6 +358,7 @@ class HybridAutomaton:
             if k not in values:
                 raise ModelError(f"unknown parameter {k!r}; known: {sorted(values)}")
             values[k] = float(v)
+        self._check_signs(values)
         return values
 
 

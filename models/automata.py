@@ -44,6 +44,7 @@ def impact_pair(**parameters: float) -> HybridAutomaton:
         [Transition("hit_right", "free", "free", x2 - x1 - gap, +1, reset),
          Transition("hit_left", "free", "free", x1 - x2 - gap, +1, reset, priority=1)],
         observables={"H": energy, "z": x2 - x1},
+        positive=("k1", "m1", "m2", "gap"), nonnegative=("k2", "c1", "c2", "theta", "r"),
     )
 
 
@@ -67,6 +68,7 @@ def vibrating_table(**parameters: float) -> HybridAutomaton:
         (x, v), {**defaults, **parameters}, [Mode("air", (v, -g), (0, sp.sqrt(2 * D)))],
         [Transition("table", "air", "air", table - x, +1, (table, table_v - r * (v - table_v)))],
         observables={"height": x - table, "H": v**2 / 2 + g * x},
+        nonnegative=("D", "r", "A", "omega"),
     )
 
 

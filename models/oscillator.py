@@ -219,6 +219,51 @@ class ImpactOscillator:
                     f"barriers must enclose or touch the equilibrium x = 0 (left <= 0 <= right): got left={left:g}, "
                     f"right={right:g}"
                 )
+        self._check_restoring()
+
+    def _restoring_of_parameters(self):
+        """(parameter names, g as a numpy function of x and those parameters), built once and shared by the copies
+        that :meth:`with_params` makes (each check would otherwise lambdify g again)."""
+        cached = self.__dict__.get("_g_of_parameters")
+        if cached is None:
+            names = sorted(self.params)
+            fn = sp.lambdify([X, *[real_symbol(k) for k in names]], self.g, ["scipy", "numpy"])
+            cached = self.__dict__["_g_of_parameters"] = (names, fn)
+        return cached
+
+    def _check_restoring(self, samples: int = 401, reach: float = 50.0) -> None:
+        """g must be a finite real number at every admissible x (sampled between the walls, or up to |x| = ``reach``
+        on a side without one), and G must grow outwards on a side without a wall, or the motion escapes."""
+        left, right = self.barriers
+        lo, hi = max(left, -reach), min(right, reach)
+        xs = np.unique(np.concatenate([np.linspace(lo, hi, samples), [0.0]]))
+        where = "between the walls" if self.has_barriers else "near the equilibrium"
+        names, g_of = self._restoring_of_parameters()
+        try:
+            with np.errstate(all="ignore"):
+                gx = np.broadcast_to(np.asarray(g_of(xs, *[self.params[k] for k in names]), dtype=float), xs.shape)
+        except Exception as exc:  # the user's expression cannot be evaluated: say where, in one line
+            raise ModelError(f"the restoring force g(x) = {self.g} cannot be evaluated on [{lo:g}, {hi:g}] "
+                             f"({type(exc).__name__}: {exc})") from exc
+        bad = ~np.isfinite(gx)
+        if bad.any():
+            raise ModelError(
+                f"the restoring force g(x) = {self.g} is not a finite real number at x = {xs[bad][0]:.6g}, "
+                f"inside the admissible range [{lo:g}, {hi:g}] {where}; declare a force defined on the whole range "
+                "(e.g. sign(x)*sqrt(Abs(x)) instead of sqrt(x)) or put the walls where it is defined"
+            )
+        for side, open_side in ((-1.0, not np.isfinite(left)), (1.0, not np.isfinite(right))):
+            if not open_side:
+                continue
+            with np.errstate(all="ignore"):
+                near, far = (float(v) for v in self.potential(np.array([side * reach / 2, side * reach])))
+            if not far > near:  # also NaN
+                raise ModelError(
+                    f"the restoring force g(x) = {self.g} does not confine the motion on the "
+                    f"{'left' if side < 0 else 'right'}: there is no wall on that side and the potential G does not "
+                    f"grow outwards (G({side * reach / 2:g}) = {near:.4g}, G({side * reach:g}) = {far:.4g}), so "
+                    "orbits escape to infinity; add a wall on that side (barriers=...) or a force that pulls back"
+                )
 
     def _check_intensity(self) -> None:
         """A state-independent intensity matrix D_kl must be real, finite and positive semi-definite."""

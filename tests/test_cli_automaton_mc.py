@@ -160,7 +160,7 @@ BAD = [
     (["--model", "duffing", "--filter", "bandpass", "--param", "zeta=-1"], "zeta=-1.0 must be a positive"),
     (["--model", "duffing", "--filter", "ou", "--param", "D=-1"], "negative"),
     (["--model", "{tmp}/user.py:ou_velocity"], "nothing to histogram"),
-    (["--model", "impact_pair", "--range", "z=0:1:10000000", "--max-memory-gb", "0.01"], "GiB"),
+    (["--model", "impact_pair", "--range", "z=0:1:10000000", "--max-memory-gb", "0.01"], "GB of memory (histograms"),
     (["--model", "vibrating_table", "--phases", "4"], "--phases needs a forced oscillator model"),
     (["--model", "impact_pair", "--events", "-1"], "events=-1 must be an integer >= 0"),
 ]

@@ -31,7 +31,7 @@ BAD = [
     (["pdf", "--out", "{tmp}/p.csv", "--points", "1000000000"], "GiB"),
     (["pdf", "--out", "{tmp}/p.csv", "--points", "1e9"], "--points: '1e9' is not an integer"),
     (["pdf", "--out", "{tmp}/p.csv", "--joint", "{tmp}/j.csv", "--joint-points", "100000"], "GiB"),
-    (["orbit", "--max-impacts", "1000000000000"], "GiB"),
+    (["orbit", "--max-impacts", "1000000000000"], "GB"),
     (["orbit", "--max-steps", "0"], "--max-steps=0"),
     # user model classes
     (["orbit", "--model", "{tmp}/bad.py:Bad"], "raised RuntimeError: constructor failed"),
@@ -73,8 +73,16 @@ def test_h_max_that_cuts_the_mass_is_one_warning_line(tmp, capsys):
     assert len(err) == 1 and err[0].startswith("vibro pdf: warning: h_max=1e-09 cuts off 1 of the")
 
 
-def test_huge_t_end_stops_at_the_step_budget(capsys):
+def test_huge_t_end_is_refused_with_the_estimate(capsys):
     rc = main(["orbit", "--t-end", "1e300", "--max-steps", "2000", "--rows", "0"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "needs about 3.16e+299 integration steps" in err[0] and "above the limit 2000" in err[0]
+    assert "--max-steps" in err[0]
+
+
+def test_an_orbit_longer_than_estimated_stops_at_the_step_budget(capsys):
+    rc = main(["orbit", "--t-end", "500", "--max-steps", "300", "--rows", "0"])
     out = capsys.readouterr().out
     assert rc == 1
-    assert "status max_steps" in out and "max_steps=2000" in out
+    assert "status max_steps" in out and "max_steps=300" in out

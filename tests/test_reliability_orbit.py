@@ -10,6 +10,7 @@ from problems import bouncing_ball, bouncing_ball_zeno_time
 
 from hybrid.deterministic import ZenoDetector, simulate_orbit
 from hybrid.errors import ParameterError, RestitutionError
+from hybrid.sizes import SizeError
 from models import CustomRestitution, DuffingImpact, ImpactOscillator, Newton
 from models.restitution import _CHECK_SPEEDS
 
@@ -106,11 +107,22 @@ def test_missed_impact_against_the_left_wall_heyoka():
 # ----------------------------------------------------------------------------- bounded work
 
 @pytest.mark.parametrize("backend", ["heyoka", "scipy"])
-def test_huge_t_end_stops_at_max_steps(backend):
+def test_huge_t_end_is_refused_with_the_estimate(backend):
+    import time
+
     m = DuffingImpact(c=0.0, D=0.0, restitution=Newton(0.9))
-    res = simulate_orbit(m, (0.0, 2.2), 1e300, backend=backend, max_steps=300)
+    start = time.perf_counter()
+    with pytest.raises(SizeError, match=r"t_end=1e\+300 needs about 3.16e\+299 integration steps.*above the limit 300"):
+        simulate_orbit(m, (0.0, 2.2), 1e300, backend=backend, max_steps=300)
+    assert time.perf_counter() - start < 5.0  # estimated, before any integrator is built
+
+
+@pytest.mark.parametrize("backend", ["heyoka", "scipy"])
+def test_an_orbit_longer_than_estimated_still_stops_at_max_steps(backend):
+    m = DuffingImpact(c=0.0, D=0.0, restitution=Newton(0.9))
+    res = simulate_orbit(m, (0.0, 2.2), 500.0, backend=backend, max_steps=300)  # estimated at 158 steps
     assert res.status == "max_steps" and res.n_steps == 300
-    assert "max_steps=300" in res.message and res.t < 1e300
+    assert "max_steps=300" in res.message and res.t < 500.0
 
 
 @pytest.mark.parametrize("backend,kwargs", [
@@ -125,7 +137,7 @@ def test_unbounded_or_impossible_settings_are_refused(backend, kwargs):
         simulate_orbit(m, (0.0, 2.2), 10.0, backend=backend, **kwargs)
     assert "\n" not in str(info.value)
     if "max_impacts" in kwargs and kwargs["max_impacts"] is not True:
-        assert "GiB" in str(info.value)
+        assert "GB" in str(info.value)
 
 
 def test_machine_precision_tolerance_is_still_accepted():

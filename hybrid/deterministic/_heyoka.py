@@ -126,6 +126,7 @@ class HeyokaBackend(OrbitBackend):
     """
 
     name = "heyoka"
+    seconds_per_step = 3e-5  # measured 22-150 us per step with the per-step check (2 shared cores)
 
     def __init__(self, automaton, params, rtol=None, atol=None, dense=False, **options):
         if options:

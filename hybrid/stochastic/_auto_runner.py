@@ -20,6 +20,7 @@ import numpy as np
 import sympy as sp
 
 from hybrid.errors import ModelError, ParameterError
+from hybrid.sizes import check_limit, check_size
 
 from . import _auto_codegen, _auto_exec, _rng
 from ._auto_exec import COUNT_NAMES
@@ -547,17 +548,13 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     if n_samp < 1:
         raise ParameterError(f"t_end - t_burn = {t_end - t_burn:g} is shorter than one sample (dt * stride)")
     work = float(paths) * (n_burn + n_samp * stride)
-    if work > max_path_steps:
-        raise ParameterError(
-            f"the request is {work:.3g} path-steps (paths x (t_end / dt)), above the limit {max_path_steps:.3g}; "
-            "reduce paths or t_end, raise dt, or pass a larger max_path_steps"
-        )
+    check_size("the request", work=work, work_unit="path-steps", max_work=check_limit("max_path_steps", max_path_steps),
+               detail="paths x (t_end / dt)", fix="reduce paths or t_end, raise dt, or pass a larger max_path_steps")
     check_chunk_count(paths, chunk_paths)  # before compiling: each chunk spawns its own stream
     n_log = _as_count("events", events, "the firings kept per path; 0: none")  # (events: the firing counts below)
-    if 24.0 * paths * n_log > MAX_EVENT_LOG_BYTES:
-        raise ParameterError(
-            f"events={n_log} for {paths} paths keeps {24.0 * paths * n_log / 2**30:.3g} GiB of event log, above "
-            f"{MAX_EVENT_LOG_BYTES / 2**30:.3g} GiB; keep fewer events per path or run fewer paths")
+    check_size(f"the event log of events={n_log} for {paths} paths", memory=24.0 * paths * n_log,
+               max_memory=MAX_EVENT_LOG_BYTES,
+               detail="24 bytes per kept firing", fix="keep fewer events per path or run fewer paths")
     values = automaton.resolve_parameters(params)
     n = len(automaton.states)
     try:

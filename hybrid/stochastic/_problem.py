@@ -12,11 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-MAX_PATH_STEPS = 1e13
-"""Default refusal threshold for paths x steps (about a day on a large node)."""
-
-MAX_MEMORY = 4e9
-"""Default refusal threshold (bytes) for the histograms held at once."""
+from hybrid.sizes import MAX_MEMORY, MAX_PATH_STEPS  # the shared size estimator's default limits
 
 
 @dataclass(frozen=True)

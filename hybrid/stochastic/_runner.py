@@ -32,6 +32,7 @@ from hybrid.errors import (
     VibroWarning,
 )
 from hybrid.io import atomic_write
+from hybrid.sizes import check_limit, check_size
 
 from . import _codegen, _front, _rng, _shared_exec
 from ._problem import MAX_MEMORY, MAX_PATH_STEPS, EnsembleProblem, Execution, MonteCarloAlgorithm
@@ -244,26 +245,18 @@ def _bin_scale(lo: float, hi: float, n: int) -> float:
 
 def _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_memory) -> None:
     """Refuse, with the estimate, a run beyond ``max_path_steps`` path-steps or ``max_memory`` bytes of histograms."""
-    for name, val in (("max_path_steps", max_path_steps), ("max_memory", max_memory)):
-        if isinstance(val, bool) or not isinstance(val, (int, float, np.integer, np.floating)) or not val > 0:
-            raise ParameterError(f"{name}={val!r} must be a positive number")
+    max_path_steps = check_limit("max_path_steps", max_path_steps)
+    max_memory = check_limit("max_memory", max_memory)
     steps = float(t_end) / float(dt)  # in floats: t_end / dt may exceed every integer type (or be inf)
-    work = paths * steps
-    if not work <= max_path_steps:
-        raise ParameterError(
-            f"the run needs {work:.3g} path-steps ({paths} paths x {steps:.3g} steps of dt={dt:g} up to "
-            f"t_end={t_end:g}), above the limit {max_path_steps:.3g}; lower paths or t_end, raise dt, or raise "
-            "the limit (max_path_steps=, --max-path-steps)"
-        )
     cells = float(bins) + float(v_bins) + (float(xy_bins[0]) * float(xy_bins[1]) if xy_bins is not None else 0.0)
     # int64 histograms: one set per running thread, the running totals, one buffered result and a merge copy
-    need = 8.0 * cells * (nb.get_num_threads() + 3)
-    if not need <= max_memory:
-        raise ParameterError(
-            f"the histograms need about {need / 1e9:.3g} GB ({cells:.3g} bins x 8 bytes x "
-            f"{nb.get_num_threads() + 3} copies), above the limit {max_memory / 1e9:.3g} GB; lower bins, xy_bins "
-            "or v_bins, or raise the limit (max_memory=, --max-memory-gb)"
-        )
+    copies = nb.get_num_threads() + 3
+    check_size("the run", work=paths * steps, work_unit="path-steps", max_work=max_path_steps,
+               work_fix=f"{paths} paths x {steps:.3g} steps of dt={dt:g} up to t_end={t_end:g}; lower paths or "
+                        "t_end, raise dt, or raise the limit (max_path_steps=, --max-path-steps)",
+               memory=8.0 * cells * copies, max_memory=max_memory,
+               memory_fix=f"{cells:.3g} histogram bins x 8 bytes x {copies} copies; lower bins, xy_bins or v_bins, "
+                          "or raise the limit (max_memory=, --max-memory-gb)")
 
 
 def check_chunk_count(paths: int, chunk_paths: int) -> int:

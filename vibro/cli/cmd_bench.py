@@ -31,16 +31,49 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+PARTS = {"work-precision": ("mc", "averaging", "deterministic"), "validity": ("averaging", "mc", "orbits")}
+"""The parts of each task that --parts may name."""
+
+
+def parse_parts(task: str, text: str | None) -> tuple[str, ...] | None:
+    """The parts named by ``--parts`` (None: every part), checked before anything runs.
+
+    An empty list would run nothing (or, read as absent, every full-size part for hours): refused, as are unknown
+    and repeated names.
+
+    Examples
+    --------
+    >>> parse_parts("validity", "mc, orbits")
+    ('mc', 'orbits')
+    """
+    from hybrid.errors import ParameterError
+
+    if text is None:
+        return None
+    if task not in PARTS:
+        raise ParameterError("--parts applies to work-precision and validity only")
+    names = tuple(s.strip() for s in text.split(","))
+    known = PARTS[task]
+    if not any(names) or "" in names:
+        raise ParameterError(f"--parts {text!r} names an empty part; give a comma-separated subset of "
+                             f"{','.join(known)}, or omit --parts for every part")
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ParameterError(f"--parts: unknown {task} part(s) {unknown}; choose from {','.join(known)}")
+    if len(set(names)) != len(names):
+        raise ParameterError(f"--parts {text!r} repeats a part; name each once")
+    return names
+
+
 def run(args) -> int:
     """Dispatch to the benchmark task."""
     import time
 
-    from hybrid.errors import ParameterError
     from hybrid.io import check_output_dir
 
     check_output_dir(args.out_dir, "--out-dir")
     t0 = time.perf_counter()
-    parts = tuple(s.strip() for s in args.parts.split(",")) if args.parts else None
+    parts = parse_parts(args.task, args.parts)
     if args.task == "work-precision":
         from vibro.studies.workprecision import work_precision
 
@@ -50,8 +83,6 @@ def run(args) -> int:
 
         validity_maps(args.out_dir, quick=args.quick, **({"parts": parts} if parts else {}))
     else:
-        if parts:
-            raise ParameterError("--parts applies to work-precision and validity only")
         from vibro.studies.validity import solve_verification
 
         df = solve_verification(args.out_dir, tol=args.tol, quick=args.quick)

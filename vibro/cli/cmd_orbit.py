@@ -6,6 +6,8 @@ import argparse
 import math
 from pathlib import Path
 
+import numpy as np
+
 from hybrid.errors import ModelError, ParameterError
 
 DEFAULT_STATE = (0.0, 2.2)
@@ -68,7 +70,8 @@ def register(subparsers) -> None:
                    help="stop with status max_impacts after this many impacts; bounds the cost, which grows with "
                         "the number of impacts")
     p.add_argument("--max-steps", type=int, default=10_000_000, dest="max_steps",
-                   help="stop after this many integration steps, so a huge --t-end stays bounded")
+                   help="step budget: an orbit estimated above it is refused before it starts (with the estimate), "
+                        "and one that still reaches it stops with status max_steps")
     p.add_argument("--out", default=None, metavar="FILE.csv",
                    help="write the impact log here (atomically; not written if absent)")
     p.add_argument("--rows", type=int, default=6, help="table rows per comparison (default 6)")
@@ -195,11 +198,20 @@ def run(args: argparse.Namespace) -> int:
         print(f"no comparison with eqs. 11-14: the model is forced (F = {model.forcing})")
         return 0 if res.status in ("ok", "max_impacts") else 1
     try:
-        Gd = model.barrier_energy
+        with np.errstate(over="ignore", invalid="ignore"):  # a wall at 1e300 overflows G: said below
+            Gd = model.barrier_energy
     except ModelError as exc:  # asymmetric barriers: no single impact level for eqs. 11-14
         print(f"no comparison with eqs. 11-14: {exc}")
         return 0 if res.status in ("ok", "max_impacts") else 1
     H0 = float(model.energy(x0, v0))
+    if not math.isfinite(Gd):  # no wall, or one so far that G there overflows: eqs. 11-14 have no impact level
+        why = ("the model has no walls" if not model.has_barriers else
+               "the walls are so far that G(delta) overflows double precision")
+        with np.errstate(over="ignore", invalid="ignore"):  # G at such walls is inf: no wall for the quadrature
+            free = float(period(model, H0)[0])
+        print(f"no comparison with eqs. 11-14: {why}, so the orbit has no impacts; free period (eq. 8) "
+              f"T(H0) = {free:.12g} at H0 = {H0:.12g}")
+        return 0 if res.status in ("ok", "max_impacts") else 1
     print(f"G(delta) = {Gd:.12g}, H0 = {H0:.12g}")
     if len(df) == 0:
         if H0 == 0.0:

@@ -62,6 +62,9 @@ def _user_attribute(spec: str, what: str):
         module = importlib.util.module_from_spec(module_spec)
         try:
             module_spec.loader.exec_module(module)
+        except SystemExit as exc:  # sys.exit() in the user's file would end vibro silently with its status
+            raise ParameterError(f"could not import {path!r}: it called sys.exit({exc.code!r}); a model file must "
+                                 "not exit (guard its script part with if __name__ == '__main__':)") from exc
         except Exception as exc:  # the user's file: report, do not trace back
             raise ParameterError(f"could not import {path!r}: {type(exc).__name__}: {exc}") from exc
         _USER_MODULES[key] = module
@@ -135,6 +138,8 @@ def _call_user(factory, name: str):
     except TypeError as exc:  # required arguments, or a type error in the body
         raise ParameterError(f"{name} cannot be built without arguments ({exc}); give its parameters defaults and "
                              "set them with --param NAME=VALUE") from exc
+    except SystemExit as exc:  # would end vibro silently with the user's status
+        raise ParameterError(f"{name}() called sys.exit({exc.code!r}); a model must be built without exiting") from exc
     except Exception as exc:  # the user's code failed: report it, do not trace back
         raise ParameterError(f"{name}() raised {type(exc).__name__}: "
                              f"{str(exc).splitlines()[0] if str(exc) else ''}") from exc
@@ -145,21 +150,11 @@ def model_from_args(args: argparse.Namespace):
 
     Parameters not given keep the model's defaults.
     """
-    from hybrid.errors import VibroError
     from models import parse_restitution
 
     law = parse_restitution(args.restitution) if args.restitution else None
     cls = load_model_class(args.model)
-    try:
-        model = cls()
-    except VibroError:
-        raise
-    except TypeError as exc:  # a constructor with required arguments, or a body with a type error
-        raise ParameterError(f"model class {cls.__name__} cannot be built without arguments ({exc}); give its "
-                             "parameters defaults and set them with --param NAME=VALUE") from exc
-    except Exception as exc:  # the user's constructor failed: report it, do not trace back
-        raise ParameterError(f"model class {cls.__name__}() raised {type(exc).__name__}: "
-                             f"{str(exc).splitlines()[0] if str(exc) else ''}") from exc
+    model = _call_user(cls, f"model class {cls.__name__}")
     if law is not None:
         model = model.with_restitution(law)
     params = parse_params(args.param)

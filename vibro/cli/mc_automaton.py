@@ -26,6 +26,7 @@ import warnings
 from pathlib import Path
 
 from hybrid.errors import ParameterError
+from hybrid.sizes import check_size
 
 FILTERS = ("bandpass", "ou")
 """Names of ``models.excitation.FILTER_KINDS`` (kept here so that ``vibro --help`` imports no sympy)."""
@@ -243,10 +244,10 @@ def run(args, resolved, plan) -> int:
     chunk = args.chunk_paths or max(1, min(8, args.paths // 8))
     if isinstance(chunk, int) and chunk >= 1 and args.paths >= 1:  # bad values: simulate_automaton says why
         cells = -(-args.paths // chunk) * len(obs) * (max(b for _, _, b in hist.values()) + 2)
-        if cells * 8 > args.max_memory_gb * 1e9:  # one int64 histogram row per chunk and observable
-            raise ParameterError(f"the histograms need {cells * 8 / 2**30:.3g} GiB ({cells:.3g} counters over the "
-                                 f"chunks), above --max-memory-gb {args.max_memory_gb:g}; use fewer bins or larger "
-                                 "--chunk-paths")
+        # one int64 histogram row per chunk and observable
+        check_size("the run", memory=cells * 8.0, max_memory=args.max_memory_gb * 1e9,
+                   detail=f"histograms of {cells:.3g} counters over the chunks",
+                   fix=f"use fewer bins or larger --chunk-paths, or raise --max-memory-gb {args.max_memory_gb:g}")
     started = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:  # printed as one line each below
         warnings.simplefilter("always")

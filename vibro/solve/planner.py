@@ -52,6 +52,36 @@ def step_limit(model, h_max) -> float:
     return dt
 
 
+NOMINAL_STAT_CONST = 3.0
+"""Statistical constant C' (L1 ~ C' / sqrt(paths x time)) assumed before the pilot measures it."""
+NOMINAL_RATE = 5e7
+"""Path-steps per second assumed before the pilot measures the throughput."""
+PLAN_PATHS = 64
+PILOT_PATH_RUNS = 4 * 8  # pilot_run's groups x paths
+
+
+def check_plan(tol, dt, t_burn, t_pilot_sample, max_cost) -> None:
+    """Refuse, before the pilot runs, a tolerance whose Monte Carlo work is beyond :data:`MAX_PATH_STEPS`, or whose
+    pilot alone would take longer than ``max_cost`` (both at the nominal constants, with the step ``dt`` that the
+    tolerance's bias budget gives)."""
+    from hybrid.sizes import MAX_PATH_STEPS, check_size
+
+    need = (NOMINAL_STAT_CONST / tol) ** 2  # paths x sampled time for the statistical error alone
+    t_sample = max(need / PLAN_PATHS, 200.0)
+    work = PLAN_PATHS * (t_sample + t_burn) / dt
+    check_size(f"Monte Carlo to tol={tol:g}", work=work, work_unit="path-steps", max_work=MAX_PATH_STEPS,
+               seconds_per_unit=1.0 / NOMINAL_RATE, max_memory=None,
+               detail=f"{PLAN_PATHS} paths x {t_sample + t_burn:.3g} time units at dt={dt:.3g}, at "
+                      f"{NOMINAL_RATE:.0e} path-steps per second",
+               fix="raise the tolerance (--tol)")
+    if t_pilot_sample:
+        pilot = PILOT_PATH_RUNS * (t_pilot_sample + t_burn) / dt
+        check_size(f"the Monte Carlo pilot for tol={tol:g}", work=pilot, work_unit="path-steps",
+                   max_work=max_cost * NOMINAL_RATE, seconds_per_unit=1.0 / NOMINAL_RATE, max_memory=None,
+                   detail=f"{PILOT_PATH_RUNS} paths x {t_pilot_sample + t_burn:.3g} time units at dt={dt:.3g}",
+                   fix="raise the tolerance (--tol) or the budget (--max-cost)")
+
+
 def plan_monte_carlo(model, tol, h_max, relaxation_time, max_cost, pilot, seed):
     """Settings, expected L1 error and expected cost of a Monte Carlo run that aims at ``tol``.
 
@@ -65,6 +95,11 @@ def plan_monte_carlo(model, tol, h_max, relaxation_time, max_cost, pilot, seed):
     capped : bool
         True when ``max_cost`` cut the run short of the tolerance.
     """
+    # the largest step any scheme's bias budget allows bounds the work from below: an impossible tolerance is
+    # refused before the schemes are checked against the model (symbolic, seconds)
+    best_dt = min(0.05, max((tol / 3.0 / c) ** (1.0 / scheme_order(s)) for s, c in bias_constants().items()
+                            if s in MC_SCHEMES))
+    check_plan(tol, best_dt, 200.0, 0.0, max_cost)
     scheme = pick_scheme(model)
     p = scheme_order(scheme)
     bias_c = bias_constants()[scheme]
@@ -74,14 +109,16 @@ def plan_monte_carlo(model, tol, h_max, relaxation_time, max_cost, pilot, seed):
     relax = relaxation_time if np.isfinite(relaxation_time) else 40.0
     # paths start at rest: burn in for several relaxation times (a fixed 200 biased slow limit-cycle models)
     t_burn = float(min(max(200.0, 8.0 * relax), 20000.0))
+    t_pilot_sample = float(min(max(1000.0, 20.0 * relax), 20000.0))
+    check_plan(tol, dt, t_burn, t_pilot_sample if pilot else 0.0, max_cost)
     t_pilot = time.perf_counter()
-    stat_const, rate = (pilot_run(model, scheme, dt, h_max, seed, t_burn=t_burn,
-                                  t_sample=float(min(max(1000.0, 20.0 * relax), 20000.0))) if pilot else (3.0, 5e7))
+    stat_const, rate = (pilot_run(model, scheme, dt, h_max, seed, t_burn=t_burn, t_sample=t_pilot_sample) if pilot
+                        else (NOMINAL_STAT_CONST, NOMINAL_RATE))
     t_pilot = time.perf_counter() - t_pilot
     # statistical budget: what remains of tol after the bias
     budget = max(tol - bias_c * dt**p, tol / 3.0)
     need = (stat_const / budget) ** 2  # paths * sampled time
-    paths = 64
+    paths = PLAN_PATHS
     t_sample = max(need / paths, 200.0)
     steps = paths * (t_sample + t_burn) / dt
     cost = steps / rate
