@@ -58,7 +58,7 @@ def test_cli_orbit_with_t_end_1e12_is_refused_with_the_estimate(extra, capsys):
     assert main(["orbit", "--t-end", "1e12", *extra]) == 2  # ran until killed
     assert time.perf_counter() - start < 5.0
     err = _one_line(capsys)
-    assert "t_end=1e+12 needs about 3.16e+11 integration steps" in err and "above the limit 1e+07" in err
+    assert "--t-end=1e+12 needs about 3.16e+11 integration steps" in err and "above the limit 1e+07" in err
     assert "--max-steps" in err and "years" in err
 
 
