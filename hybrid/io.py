@@ -35,7 +35,7 @@ def _name_max(folder: Path) -> int:
 
 def _temporary_name(path: Path) -> str:
     """A unique hidden name beside ``path`` that fits the file system's name limit (the stem is shortened)."""
-    tag = f".{os.getpid()}.{secrets.token_hex(4)}.part{path.suffix}"
+    tag = f".{os.getpid()}.{secrets.token_hex(4)}.part{path.suffix[:16]}"  # a suffix keeps the writer's format
     room = _name_max(path.parent if str(path.parent) else Path(".")) - len(os.fsencode(tag)) - 1
     stem = os.fsencode(path.name)[: max(room, 1)].decode(errors="ignore") or "out"
     return f".{stem}{tag}"
@@ -83,6 +83,9 @@ def check_output_file(path, label: str | None = None) -> Path:
     text = os.fspath(path) if path is not None else ""
     if not str(text).strip():
         raise OutputError(f"{label or 'output'} {str(text)!r}: give a file name")
+    if text == "-":
+        raise OutputError(f"{label or 'output'} '-': standard output is not a file this command can write; give a "
+                          "file name")
     path = Path(text)
     where = _describe(path, label)
     folder = path.parent if str(path.parent) else Path(".")
@@ -104,8 +107,8 @@ def check_output_file(path, label: str | None = None) -> Path:
         raise OutputError(f"{where} is a directory; give a file name inside it")
     if mode is not None and not stat.S_ISREG(mode):
         raise OutputError(f"{where} is not a regular file (a device, pipe or socket); give a file path")
-    if mode is not None and not os.access(path, os.W_OK) and not os.access(folder, os.W_OK):
-        raise OutputError(f"{where} is read-only and so is its folder; choose another path")
+    if mode is not None and not os.access(path, os.W_OK):  # the rename would replace it all the same: ask first
+        raise OutputError(f"{where} exists and is read-only; remove it or choose another path")
     _probe_folder(folder, path, where)
     return path
 
@@ -187,6 +190,10 @@ class OutputPlan:
             raise OutputError(f"{label} and {other} are one file ({path.name}); give them different names")
         self._claims[key] = (label, is_input)
 
+    def claim(self, path, label: str) -> None:
+        """Claim a file that the command writes without checking it now (it goes inside a claimed folder)."""
+        self._claim(Path(path), label)
+
     def file(self, path, label: str, sidecar: bool = False) -> Path:
         """Check and claim an output file (and its ``.json`` sidecar); return its Path."""
         path = check_output_file(path, label)
@@ -260,10 +267,14 @@ def atomic_write(path, write: Callable[[str], None]) -> Path:
     return path
 
 
+_DISK_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG}
+
+
 def _is_disk_error(exc: BaseException) -> bool:
-    # pandas and PIL wrap the OSError of a full disk or a closed file in errors of their own
+    # pandas and PIL wrap the OSError of a full disk in errors of their own; only a file-system errno counts, so that
+    # a defect raised while some other OSError was handled is not reported as a write failure
     seen = exc.__cause__ or exc.__context__
-    return isinstance(seen, OSError)
+    return isinstance(seen, OSError) and seen.errno in _DISK_ERRNOS
 
 
 def _disk_reason(exc: BaseException) -> str:

@@ -29,8 +29,8 @@ from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
 
-HOSTILE_NUMBERS = ["0", "-1", "nan", "inf", "-inf", "1e300", "1e-300", "", "abc", "1" + "0" * 30]
-"""The values every numeric option meets (the last one is 1e30 written as an integer)."""
+HOSTILE_NUMBERS = ["0", "-1", "nan", "inf", "-inf", "1e300", "1e-300", "", "abc", "1" + "0" * 30, str(2**63 - 1)]
+"""The values every numeric option meets (1e30 written as an integer, and the largest 64-bit integer)."""
 
 # cheap valid commands: each option is varied alone, the others keep these values (kernels are cached on disk)
 BASE = {
@@ -65,6 +65,8 @@ COLLISIONS = [
     ["solve", "--tol", "0.05", "--method", "jump", "--out", "s.json"],
     ["plot", "in.csv", "--out", "in.csv"],
     ["plot", "in.csv", "--out", "in.json"],
+    ["pdf", "--model", "in.py:M", "--method", "jump", "--points", "300", "--out", "in.py"],
+    ["mc", *BASE["mc"][1:-2], "--checkpoint", "adir", "--out", "adir/mc_checkpoint.npz"],
 ]
 
 
@@ -153,7 +155,8 @@ def _files_bad(folder: Path) -> str:
 
     for path in folder.rglob("*.csv"):
         # a figure's table leaves the Monte Carlo columns empty (NaN) under --no-mc
-        if path.name.startswith(".") or path.name == "in.csv" or not path.is_file() or path.name.startswith("fig"):
+        inputs_or_figures = path.name in ("in.csv", "in.py") or path.name.startswith(("fig", "."))
+        if inputs_or_figures or not path.is_file():
             continue
         try:
             df = pd.read_csv(path)
@@ -177,6 +180,7 @@ def run_case(case: Case, timeout: float = 30.0) -> Outcome:
     (folder / "adir").mkdir()
     os.mkfifo(folder / "fifo")
     (folder / "in.csv").write_text(PLOT_INPUT)
+    (folder / "in.py").write_text("from models import DuffingImpact as M\n")
     err_path = folder / ".stderr"
     out_path = folder / ".stdout"
     t0 = time.perf_counter()
@@ -219,8 +223,8 @@ def run_case(case: Case, timeout: float = 30.0) -> Outcome:
         return Outcome(case, "crashed", status, seconds, last, stderr)
     if status == 2:
         errors = [ln for ln in lines if "error:" in ln]
-        written = [p.name for p in folder.rglob("*") if p.is_file() and p.name not in ("in.csv", ".stderr",
-                                                                                     ".stdout", "fifo")]
+        written = [p.name for p in folder.rglob("*") if p.is_file() and p.name not in ("in.csv", "in.py",
+                                                                                     ".stderr", ".stdout", "fifo")]
         if len(errors) != 1 or written:
             return Outcome(case, "unclear", status, seconds, f"{len(errors)} error lines, wrote {written}", stderr)
         # a refused option must be named; a refused --param may answer about the model it makes (its damping)

@@ -81,13 +81,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-LARGEST_INT = 2**53
-"""Integer options above this are refused when read: no count, seed or size of this package needs more, and numpy,
-numba and heyoka overflow (or crash) on integers beyond 64 bits."""
+LARGEST_INT = 2**63 - 1
+"""Integer options beyond a signed 64-bit integer are refused when read: numpy, numba and heyoka overflow (or crash)
+on them, and no count, seed or size needs more (each command refuses the sizes it cannot run, with its estimate)."""
 
 
 def checked_int(text: str) -> int:
-    """An integer option: digits only (no ``1e3``, no ``2.5``), at most :data:`LARGEST_INT` in magnitude.
+    """An integer option: digits only (no ``1e3``, no ``2.5``), within a signed 64-bit integer.
 
     Examples
     --------
@@ -96,14 +96,14 @@ def checked_int(text: str) -> int:
     >>> checked_int("1" + "0" * 30)
     Traceback (most recent call last):
     ...
-    argparse.ArgumentTypeError: 1000000000000000000000000000000 is too large (at most 2^53 = 9007199254740992)
+    argparse.ArgumentTypeError: 1000000000000000000000000000000 is beyond a 64-bit integer (at most 2^63 - 1)
     """
     try:
         value = int(text.strip())
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
     if abs(value) > LARGEST_INT:
-        raise argparse.ArgumentTypeError(f"{text} is too large (at most 2^53 = {LARGEST_INT})")
+        raise argparse.ArgumentTypeError(f"{text} is beyond a 64-bit integer (at most 2^63 - 1)")
     return value
 
 

@@ -158,9 +158,14 @@ def run(args) -> int:
 
 def plan_outputs(args):
     """The files and folder ``vibro mc`` writes, checked together (writable, no two on one file) before the run."""
-    from hybrid.io import OutputPlan
+    from pathlib import Path
 
-    plan = OutputPlan()
+    from hybrid.stochastic._auto_exec import CHECKPOINT_FILE as AUTOMATON_CHECKPOINT
+    from hybrid.stochastic._cuda import CUDA_CHECKPOINT_FILE
+    from hybrid.stochastic._runner import CHECKPOINT_FILE
+    from vibro.cli.common import output_plan
+
+    plan = output_plan(args)
     plan.file(args.out, "--out", sidecar=True)
     if args.joint:
         plan.file(args.joint, "--joint")
@@ -168,6 +173,8 @@ def plan_outputs(args):
         plan.file(args.summary_json, "--summary-json")
     if args.checkpoint is not None:
         plan.folder(args.checkpoint, "--checkpoint")
+        for name in (CHECKPOINT_FILE, AUTOMATON_CHECKPOINT, CUDA_CHECKPOINT_FILE):  # the files it will hold
+            plan.claim(Path(args.checkpoint) / name, "the checkpoint file in --checkpoint")
     return plan
 
 

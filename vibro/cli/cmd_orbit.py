@@ -169,9 +169,9 @@ def run(args: argparse.Namespace) -> int:
     if args.rows < 0:
         raise ParameterError(f"--rows {args.rows} must be >= 0")
     if args.out is not None:
-        from hybrid.io import OutputPlan
+        from .common import output_plan
 
-        OutputPlan().file(args.out, "--out", sidecar=True)
+        output_plan(args).file(args.out, "--out", sidecar=True)
     x0, v0 = initial_state(args)
     model = model_from_args(args)
     model.restitution.validate()

@@ -116,9 +116,9 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--joint-points {args.joint_points} makes a {args.joint_points}^2 grid needing about "
                              f"{args.joint_points**2 * _BYTES_PER_CELL / 2**30:.3g} GiB plus a CSV line per cell; use "
                              f"at most {int(_MAX_JOINT_CELLS**0.5)}")
-    from hybrid.io import OutputPlan
+    from .common import output_plan
 
-    plan = OutputPlan()  # checked before the work: a bad path costs nothing
+    plan = output_plan(args)  # checked before the work: a bad path costs nothing
     plan.file(args.out, "--out", sidecar=True)
     if args.joint is not None:
         plan.file(args.joint, "--joint")

@@ -54,9 +54,9 @@ def run(args) -> int:
 
     check_request(args.tol, args.max_cost)  # before any output: bad input gives one line
     if args.out is not None:
-        from hybrid.io import OutputPlan
+        from .common import output_plan
 
-        OutputPlan().file(args.out, "--out", sidecar=True)
+        output_plan(args).file(args.out, "--out", sidecar=True)
     model = model_from_args(args)
     print(f"model: {model!r}")
     if not any(math.isfinite(v) for v in model.barriers):  # e.g. --param delta=inf: say what the inf means
@@ -78,7 +78,10 @@ def run(args) -> int:
     if mode == "lines":
         print(f"vibro solve: {sol.method} done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     print(sol.summary())
-    preds = ", ".join(f"{k} {v:.3g}" for k, v in sol.choice.predictions.items())
+    # inf: the method does not apply to this model; NaN: its accuracy is not rated here (said in words, not numbers)
+    words = {math.inf: "not applicable"}
+    preds = ", ".join(f"{k} {v:.3g}" if math.isfinite(v) else f"{k} {words.get(v, 'not rated')}"
+                      for k, v in sol.choice.predictions.items())
     print(f"predicted L1 of the candidates: {preds}")
     if args.out is not None:
         from hybrid.io import write_csv_atomically

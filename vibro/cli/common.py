@@ -25,6 +25,27 @@ def add_model_arguments(parser: argparse.ArgumentParser, restitution_default: st
     )
 
 
+def output_plan(args: argparse.Namespace):
+    """A :class:`hybrid.io.OutputPlan` for a command, with its inputs noted: the model file of ``--model
+    FILE.py:NAME`` can then not be overwritten by an output.
+
+    Examples
+    --------
+    >>> plan = output_plan(argparse.Namespace(model="my_model.py:Linear"))
+    >>> plan.file("my_model.py", "--out")
+    Traceback (most recent call last):
+    ...
+    hybrid.errors.OutputError: --out and the input --model are one file (my_model.py); give them different names
+    """
+    from hybrid.io import OutputPlan
+
+    plan = OutputPlan()
+    path, colon, _ = str(getattr(args, "model", "") or "").rpartition(":")
+    if colon and path.endswith(".py"):
+        plan.reads(path, "--model")
+    return plan
+
+
 def parse_params(items: list[str]) -> dict[str, float]:
     """Turn ``["a=1", "delta=0.8"]`` into a dict of floats, with a clear error on bad items.
 
