@@ -442,7 +442,7 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
         else:
             h = 1.25 * top
         sd = solve_phase_plane(model, grid, h, walls, restitution, 3)
-    if h < h_max:
+    if h < h_max or len(sd.H) != int(points):  # the last solve may have widened back to h_max with 3 points
         sd.h_max = float(h_max)
         sd.H = output_grid(h, float(h_max), int(points))
         sd.p = sd.density(sd.H)
