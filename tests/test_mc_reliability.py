@@ -314,7 +314,7 @@ def test_checkpoint_that_is_a_file_is_one_line(tmp_path, capsys):
     f = tmp_path / "file"
     f.write_text("x")
     assert vibro(CLI + ["--checkpoint", str(f), "--out", str(tmp_path / "h.csv")]) == 2
-    assert "is a file, not a directory" in one_line_error(capsys)
+    assert "is a file, not a folder" in one_line_error(capsys)
 
 
 # the model refuses a constant negative intensity itself (not positive semi-definite) before any simulation

@@ -519,7 +519,7 @@ def test_cli_output_and_summary(tmp_path, capsys):
 
 @pytest.mark.parametrize("bad,reason", [
     (["--dt=-1e-3"], "dt=-0.001"), (["--dt", "0.5"], "too large"), (["--paths", "0"], "paths=0"),
-    (["--t-burn", "300"], "t_burn"), (["--param", "D=-0.1"], "D=-0.1"), (["--param", "delta=-1"], "delta=-1"),
+    (["--t-burn", "300"], "--t-burn=300"), (["--param", "D=-0.1"], "D=-0.1"), (["--param", "delta=-1"], "delta=-1"),
     (["--resume"], "--checkpoint"), (["--bins", "0"], "bins=0"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(bad, reason, tmp_path, capsys):
