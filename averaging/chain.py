@@ -58,6 +58,7 @@ from .stationary import (
     _check_scale,
     _mass_range,
     check_confinement,
+    check_energy_range,
     energy_table,
     output_grid,
 )
@@ -312,6 +313,7 @@ def chain_density(model, h_max: float = 4.0, points: int = 2000, phases: int = D
             not (math.isfinite(float(h_max)) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     h_max, points, phases, n = float(h_max), int(points), int(phases), int(energies)
+    check_energy_range(model, h_max)
     geo = geometry(model)
     if n * phases * max(len(geo.levels), 1) > _MAX_STATES:
         raise ParameterError(f"energies x phases = {n * phases} states exceeds {_MAX_STATES:.0e} (one sparse LU of "

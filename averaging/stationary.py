@@ -386,6 +386,40 @@ TAIL_WARN = 1e-3
 _MAX_POINTS = 10_000_000
 
 
+ENERGY_RANGE = 1e12
+"""How far ``h_max`` may lie from the model's energy scale (G(delta), or G(1) without walls), up or down: beyond,
+double precision cannot hold the density's grid and quadrature (h_max = 1e300 overflowed the coefficients, 1e-300
+underflowed them, and each was refused with a message about the model instead of h_max)."""
+
+
+def check_energy_range(model, h_max: float, walls="model") -> None:
+    """Refuse an ``h_max`` more than :data:`ENERGY_RANGE` above or below the model's energy scale.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> check_energy_range(DuffingImpact(), 4.0)
+    >>> check_energy_range(DuffingImpact(), 1e-300)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    hybrid.errors.ParameterError: h_max=1e-300 lies ... below the model's energy scale G = 0.55; ...
+    """
+    try:
+        G = geometry(model).G_delta if walls == "model" else np.inf  # walls given apart: the well's scale G(1)
+        scale = float(G) if np.isfinite(G) and G > 0 else float(model.potential(1.0))
+    except (VibroError, ArithmeticError):
+        return  # no scale to compare with (not a single well): the solvers' own checks apply
+    if not (np.isfinite(scale) and scale > 0):
+        return
+    ratio = h_max / scale
+    if not 1.0 / ENERGY_RANGE <= ratio <= ENERGY_RANGE:
+        side = "above" if ratio > 1 else "below"
+        raise ParameterError(f"h_max={h_max:g} lies {max(ratio, 1 / ratio):.3g} times {side} the model's energy "
+                             f"scale G = {scale:.3g}; double precision cannot resolve p(H) over that range: give "
+                             f"an h_max within {ENERGY_RANGE:.0e} of it (the density's mass sits a few times D/c "
+                             "above 0)")
+
+
 def output_grid(h_mass: float, h_max: float, points: int) -> np.ndarray:
     """The ``points`` energies from 0 to ``h_max`` that p(H) is written on, placed where its mass is.
 
@@ -573,6 +607,7 @@ def stationary_density(model, method="paper", h_max: float = 4.0, points: int = 
             not (math.isfinite(float(h_max)) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     h_max = float(h_max)
+    check_energy_range(model, h_max)
     points = int(points)
     if m.flights:
         from .chain import chain_density

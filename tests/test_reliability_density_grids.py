@@ -12,7 +12,7 @@ import pytest
 
 from averaging import stationary_density
 from averaging.chain import chain_density
-from hybrid.errors import DensityResolutionWarning, NormalisationError, VibroWarning
+from hybrid.errors import DensityResolutionWarning, NormalisationError, ParameterError, VibroWarning
 from hybrid.resolution import axis_spread, check_density
 from models import DuffingImpact, ImpactOscillator, Newton
 from vibro.cli import main
@@ -64,13 +64,18 @@ def test_fpk_fits_its_rings_to_the_mass():
     assert sd.mean_energy == pytest.approx(ref.mean_energy, rel=1e-3)  # Monte Carlo: 0.5020 +- 0.0025
 
 
-# regression: fpk at h_max 1e300 died with an IndexError in the ring grid
-def test_fpk_at_an_absurd_h_max_answers_as_at_a_moderate_one():
+# regression: fpk at h_max 1e300 died with an IndexError in the ring grid; the other methods blamed the model
+def test_fpk_at_a_huge_h_max_answers_as_at_a_moderate_one_and_an_absurd_one_is_refused():
     from averaging.phase_plane import stationary_density_xy
 
     ref = stationary_density_xy(DuffingImpact(), h_max=1e3, check=False)
-    sd = stationary_density_xy(DuffingImpact(), h_max=1e300, check=False)
+    sd = stationary_density_xy(DuffingImpact(), h_max=1e11, check=False)
     assert sd.h_support < 20.0 and sd.mean_energy == pytest.approx(ref.mean_energy, rel=1e-3)
+    for method in ("jump", "paper", "chain"):
+        with pytest.raises(ParameterError, match="h_max=1e\\+300 lies .* above the model's energy scale"):
+            stationary_density(DuffingImpact(), method, h_max=1e300)
+    with pytest.raises(ParameterError, match="h_max=1e-300 lies .* below the model's energy scale"):
+        stationary_density_xy(DuffingImpact(), h_max=1e-300)
 
 
 def test_pdf_cli_csv_and_joint_agree_with_the_printed_moments(tmp_path, capsys):

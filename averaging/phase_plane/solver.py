@@ -13,7 +13,7 @@ from hybrid.errors import ModelError, NormalisationError, ParameterError
 from hybrid.sizes import check_size
 from models import X, Y
 
-from ..stationary import output_grid
+from ..stationary import check_energy_range, output_grid
 from ._core import Coefficients, Discretisation
 from ._grid import RingGrid
 
@@ -430,6 +430,9 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
             model.check_single_well()
         except ModelError as exc:
             raise NormalisationError(f"no stationary density: {exc}") from exc
+    if not (np.isfinite(h_max) and h_max > 0):
+        raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
+    check_energy_range(model, float(h_max), walls)
     h = _first_range(model, float(h_max))
     sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3)
     for _ in range(16):

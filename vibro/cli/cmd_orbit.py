@@ -31,7 +31,8 @@ def initial_state(args) -> tuple[float, float]:
     v0 = values[1] if len(values) == 2 else (args.v0 if args.v0 is not None else DEFAULT_STATE[1])
     state = (float(values[0]), float(v0))
     if not all(math.isfinite(v) for v in state):
-        raise ParameterError(f"--x0 {state[0]:g} {state[1]:g}: the initial state must be finite")
+        flags = "--x0" if args.v0 is None else "--x0/--v0"
+        raise ParameterError(f"{flags}: the initial state (x, v) = ({state[0]:g}, {state[1]:g}) must be finite")
     return state
 
 
