@@ -220,6 +220,40 @@ class ImpactOscillator:
                     f"right={right:g}"
                 )
         self._check_restoring()
+        self._check_damping_and_noise()
+
+    def _check_damping_and_noise(self, samples: int = 41, reach: float = 50.0, speed: float = 10.0) -> None:
+        """h(x, y) and every f_k(x, y) must be finite real numbers on the admissible states (sampled: x as for g,
+        |y| <= ``speed``): a damping c*y/x or a noise sqrt(y) gives no stochastic differential equation at all, and
+        its averaged coefficients come out as NaN or silently wrong (principal values)."""
+        exprs = [("damping h(x, y)", self.h)] + [(f"noise coefficient f_{k + 1}", f) for k, f in enumerate(self.f)]
+        cached = self.__dict__.get("_hf_of_parameters")
+        if cached is None:
+            names = sorted(self.params)
+            checked = [(what, e) for what, e in exprs if e.free_symbols <= {X, Y, *map(real_symbol, names)}]
+            fns = [(what, e, sp.lambdify([X, Y, *[real_symbol(k) for k in names]], e, ["scipy", "numpy"]))
+                   for what, e in checked]
+            cached = self.__dict__["_hf_of_parameters"] = (names, fns)
+        names, fns = cached
+        left, right = self.barriers
+        lo, hi = max(left, -reach), min(right, reach)
+        xs = np.unique(np.concatenate([np.linspace(lo, hi, samples), [0.0]]))
+        ys = np.unique(np.concatenate([np.linspace(-speed, speed, samples), [0.0]]))
+        XX, YY = np.meshgrid(xs, ys)
+        values = [self.params[k] for k in names]
+        for what, expr, fn in fns:
+            try:
+                with np.errstate(all="ignore"):
+                    out = np.broadcast_to(np.asarray(fn(XX, YY, *values), dtype=float), XX.shape)
+            except Exception as exc:  # the user's expression cannot be evaluated: say where, in one line
+                raise ModelError(f"the {what} = {expr} cannot be evaluated for x in [{lo:g}, {hi:g}], |y| <= "
+                                 f"{speed:g} ({type(exc).__name__}: {exc})") from exc
+            bad = ~np.isfinite(out)
+            if bad.any():
+                i = np.argwhere(bad)[0]
+                raise ModelError(f"the {what} = {expr} is not a finite real number at (x, y) = ({XX[tuple(i)]:.6g}, "
+                                 f"{YY[tuple(i)]:.6g}), an admissible state; declare one defined on every state "
+                                 "(e.g. Abs(y) inside a square root, no division by x)")
 
     def _restoring_of_parameters(self):
         """(parameter names, g as a numpy function of x and those parameters), built once and shared by the copies
