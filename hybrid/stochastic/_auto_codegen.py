@@ -1022,6 +1022,26 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 # event_step's pieces: the sub-steps that move the velocities only (the opening kick or Milstein step, BAOAB's O step,
 # the closing noise and kick), as they are where no guard depends on a velocity (no crossing can happen in them), and
 # the firing of a transition (shared with velocity_leg)
+_MILSTEIN_VELOCITIES = """\
+drift(mode, {state}, t, p, f)
+noise(mode, {state}, t, p, G)
+lgn(mode, {state}, t, p, L)
+for kv in range(N_POS):
+    i = VEL[kv]
+    acc = f[i] * dt
+    for k in range(M):
+        acc += G[i * M + k] * dw[k]
+    for jn in range(M):
+        for k in range(M):
+            prod = dw[jn] * dw[k]
+            if jn == k:
+                prod -= dt
+            acc += 0.5 * L[(i * M + jn) * M + k] * prod
+    {store}"""
+"""The symplectic scheme's Milstein step of the velocities from ``state``, once for the plain opening of the step
+and once for the located velocity sub-step."""
+
+
 _PLAIN_OPENING = """\
 if SCHEME == 2:
     # kick: velocities by half the drift
@@ -1035,21 +1055,7 @@ elif SCHEME == 4:
         x[VEL[k]] += 0.5 * dt * f[VEL[k]]
 elif SCHEME == 3:
     # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
-    drift(mode, x, t, p, f)
-    noise(mode, x, t, p, G)
-    lgn(mode, x, t, p, L)
-    for kv in range(N_POS):
-        i = VEL[kv]
-        acc = f[i] * dt
-        for k in range(M):
-            acc += G[i * M + k] * dw[k]
-        for jn in range(M):
-            for k in range(M):
-                prod = dw[jn] * dw[k]
-                if jn == k:
-                    prod -= dt
-                acc += 0.5 * L[(i * M + jn) * M + k] * prod
-        xr[i] = acc
+""" + textwrap.indent(_MILSTEIN_VELOCITIES.format(state="x", store="xr[i] = acc"), " " * 4) + """
     for kv in range(N_POS):
         x[VEL[kv]] += xr[VEL[kv]]
 n_ev = 0"""
@@ -1082,9 +1088,9 @@ for i in range(N):
 mode = TARGET[best]"""
 
 
-_PLAIN_O_STEP = """\
-odamp(mode, x, t, p, f)
-noise(mode, x, t, p, G)
+_O_STEP = """\
+odamp(mode, {state}, t, p, f)
+noise(mode, {state}, t, p, G)
 for kv in range(N_POS):
     i = VEL[kv]
     kd = f[i] * dt
@@ -1097,7 +1103,10 @@ for kv in range(N_POS):
     acc = 0.0
     for k in range(M):
         acc += G[i * M + k] * dw[k]
-    x[i] = a * x[i] + c * acc"""
+    {store}"""
+"""BAOAB's exact Ornstein-Uhlenbeck step of the velocities from ``state`` (plain and located)."""
+
+_PLAIN_O_STEP = _O_STEP.format(state="x", store="x[i] = a * x[i] + c * acc")
 
 
 _PLAIN_CLOSING = """\
@@ -1194,41 +1203,13 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
                         acc += G[i * M + k] * dw[k]
                     xb[i] += acc
         elif SCHEME == 3:
-            drift(mode, xa, t, p, f)
-            noise(mode, xa, t, p, G)
-            lgn(mode, xa, t, p, L)
-            for kv in range(N_POS):
-                i = VEL[kv]
-                acc = f[i] * dt
-                for k in range(M):
-                    acc += G[i * M + k] * dw[k]
-                for jn in range(M):
-                    for k in range(M):
-                        prod = dw[jn] * dw[k]
-                        if jn == k:
-                            prod -= dt
-                        acc += 0.5 * L[(i * M + jn) * M + k] * prod
-                xb[i] += acc
+''' + textwrap.indent(_MILSTEIN_VELOCITIES.format(state="xa", store="xb[i] += acc"), " " * 12) + '''
         elif kind == FORCE_KICK:
             bforce(mode, xa, t, p, f)
             for k in range(N_POS):
                 xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
         else:
-            odamp(mode, xa, t, p, f)
-            noise(mode, xa, t, p, G)
-            for kv in range(N_POS):
-                i = VEL[kv]
-                kd = f[i] * dt
-                if abs(kd) < 1e-12:
-                    a = 1.0 - kd
-                    c = 1.0
-                else:
-                    a = math.exp(-kd)
-                    c = math.sqrt(-math.expm1(-2.0 * kd) / (2.0 * kd))
-                acc = 0.0
-                for k in range(M):
-                    acc += G[i * M + k] * dw[k]
-                xb[i] = a * xa[i] + c * acc
+''' + textwrap.indent(_O_STEP.format(state="xa", store="xb[i] = a * xa[i] + c * acc"), " " * 12) + '''
         if frac < 1.0:  # after a firing: the share of the line left
             for i in range(N):
                 xb[i] = xa[i] + frac * (xb[i] - xa[i])
