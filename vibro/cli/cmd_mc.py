@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 import warnings
@@ -138,7 +139,10 @@ def run(args) -> int:
     print(f"  throughput      {stats.throughput / 1e6:.1f} M path-steps/s  (wall {stats.wall_time:.2f} s, "
           f"compile/load {stats.compile_time:.2f} s)")
     print(f"  E[H]            {stats.mean_energy:.6g}   (± = 95% batch-means CI)")
-    print(f"  P(H < G(delta)) {stats.prob_below_barrier:.6g}   G(delta) = {g:.6g}")
+    if math.isfinite(g):
+        print(f"  P(H < G(delta)) {stats.prob_below_barrier:.6g}   G(delta) = {g:.6g}")
+    else:  # no impact level: the probability is 1 by definition and G(delta) has no finite value to print
+        print("  no walls        no impacts, P(H < G(delta)) = 1")
     print(f"  impacts/time    {stats.impact_rate:.6g}   ({stats.impacts} impacts)")
     print(f"  E[x^2]          {stats.mean_x2:.6g}")
     out = stats.outside()
