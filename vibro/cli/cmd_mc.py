@@ -135,6 +135,7 @@ def run(args) -> int:
     g = stats.settings["g_barrier"]
     print(f"vibro mc: {stats.settings['scheme']} dt={stats.settings['dt']:g} paths={stats.paths} "
           f"seed={stats.seed} path-steps={stats.path_steps:.4g}")
+    print(f"  noise           {rec['noise']['text']}")
     print(f"  throughput      {stats.throughput / 1e6:.1f} M path-steps/s  (wall {stats.wall_time:.2f} s, "
           f"compile/load {stats.compile_time:.2f} s)")
     print(f"  E[H]            {stats.mean_energy:.6g}   (± = 95% batch-means CI)")
@@ -290,6 +291,7 @@ def _run_forced(args, model, started, plan) -> int:
                f"{ens.settings['phase_steps']} steps)" if args.phases else "")
     print(f"vibro mc: {args.scheme} ({scheme}) dt={ens.settings['dt']:.10g}{dt_note} paths={args.paths} "
           f"seed={args.seed} path-steps={steps:.4g}  (forced model: automaton kernel)")
+    print(f"  noise           {rec['noise']['text']}")
     print(f"  forcing         F = {model.forcing}" + (f", period {period:.10g}" if period else ""))
     print(f"  throughput      {steps / max(ens.wall_time, 1e-9) / 1e6:.1f} M path-steps/s  (wall "
           f"{ens.wall_time:.2f} s)")

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from averaging import stationary_density
     from averaging.quadrature import turning_points
     from hybrid.errors import ModelError, VibroWarning
-    from vibro.provenance import record, sidecar_path, write_sidecar
+    from vibro.provenance import noise_assumption, record, sidecar_path, write_sidecar
 
     from .common import model_from_args
 
@@ -186,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
         settings["grid"] = list(args.grid)
     write_sidecar(args.out, record("pdf", model=model, settings=settings, results=results, started=started))
     print(f"model {model.name} {dict(model.params)} restitution {model.restitution.spec()} method {args.method}")
+    print(f"noise: {noise_assumption(model)['text']}")
     print(f"E[H] = {sd.mean_energy:.8g}")
     if walls:
         print(f"P(H < G(delta)) = {sd.prob_below_barrier:.8g}   (G(delta) = {Gd:.8g})")
