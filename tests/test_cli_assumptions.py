@@ -89,3 +89,23 @@ def test_mc_of_an_automaton_prints_and_records_its_noises_and_states(tmp_path, c
     assert "noise           2 noises, 4 states, additive" in capsys.readouterr().out
     noise = json.loads(out.with_suffix(".json").read_text())["noise"]
     assert (noise["noises"], noise["states"], noise["convention"]) == (2, 4, "stratonovich")
+
+
+def test_help_prints_whole_numbers_as_integers():
+    from vibro.cli import build_parser
+
+    text = " ".join(build_parser()._subparsers._group_actions[0].choices["mc"].format_help().split())
+    assert "(default: 1e13)" in text and "(default: 2200)" in text and "10000000000000.0" not in text
+
+
+def test_the_joint_sidecar_is_claimed_before_the_run(tmp_path, capsys):
+    # --joint j.csv writes j.json: a --summary-json there is refused before any work, and nothing is written
+    argv = ["pdf", "--points", "200", "--out", str(tmp_path / "p.csv"), "--joint", str(tmp_path / "j.csv"),
+            "--joint-points", "21"]
+    assert main(argv) == 0
+    side = json.loads((tmp_path / "j.json").read_text())
+    assert side["output"] == "joint" and side["model"]["barriers"] == [-1.0, 1.0]
+    assert main(["mc", "--out", str(tmp_path / "h.csv"), "--joint", str(tmp_path / "k.csv"), "--summary-json",
+                 str(tmp_path / "k.json")]) == 2
+    assert "provenance sidecar of --joint" in capsys.readouterr().err
+    assert not (tmp_path / "h.csv").exists()

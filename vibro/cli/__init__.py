@@ -42,8 +42,22 @@ class DefaultsFormatter(argparse.HelpFormatter):
             return text
         default = action.default
         if isinstance(default, (list, tuple)):
-            default = " ".join(str(v) for v in default) if default else "none"
-        return f"{text} (default: {'none' if default is None else default})"
+            default = " ".join(format_number(v) for v in default) if default else "none"
+        return f"{text} (default: {'none' if default is None else format_number(default)})"
+
+
+def format_number(value) -> str:
+    """A default as a user would type it: whole numbers without '.0', large ones as '1e13', others exactly.
+
+    Examples
+    --------
+    >>> format_number(1e13), format_number(2200.0), format_number(0.001), format_number(0.1 + 0.2), format_number(8)
+    ('1e13', '2200', '0.001', '0.30000000000000004', '8')
+    """
+    if not isinstance(value, float) or value != value or value in (float("inf"), float("-inf")):
+        return str(value)
+    short = f"{value:g}"
+    return short.replace("e+", "e") if float(short) == value else repr(value)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -130,6 +130,8 @@ def run(args) -> int:
                                    "workers or launches"}
     rec = record("mc", model=model, settings=settings, results=stats.summary(), started=started)
     write_sidecar(args.out, rec)
+    if args.joint:  # its own record, so that vibro plot finds the barriers beside the joint CSV too
+        write_sidecar(args.joint, joint_record(rec, args.xy_bins))
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
     g = stats.settings["g_barrier"]
@@ -157,6 +159,11 @@ def run(args) -> int:
     return 0
 
 
+def joint_record(rec: dict, xy_bins) -> dict:
+    """The provenance of the ``--joint`` histogram: the run's record, saying which output it describes."""
+    return {**rec, "output": "joint", "settings": {**rec["settings"], "xy_bins": list(xy_bins)}}
+
+
 def plan_outputs(args):
     """The files and folder ``vibro mc`` writes, checked together (writable, no two on one file) before the run."""
     from pathlib import Path
@@ -169,7 +176,7 @@ def plan_outputs(args):
     plan = output_plan(args)
     plan.file(args.out, "--out", sidecar=True)
     if args.joint:
-        plan.file(args.joint, "--joint")
+        plan.file(args.joint, "--joint", sidecar=True)
     if args.summary_json:
         plan.file(args.summary_json, "--summary-json")
     if args.checkpoint is not None:
@@ -284,6 +291,8 @@ def _run_forced(args, model, started, plan) -> int:
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
     rec = record("mc", model=model, settings=settings, results=results, started=started)
     write_sidecar(args.out, rec)
+    if args.joint:
+        write_sidecar(args.joint, joint_record(rec, args.xy_bins))
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
     steps = ens.settings["paths"] * ens.settings["t_end"] / ens.settings["dt"]
