@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import os
 import pkgutil
 import re
@@ -180,6 +181,45 @@ def progress_mode(flag: bool | None, stream=None) -> str:
         return "lines"
 
 
+COMPILE_LOGGER = "hybrid.stochastic.compile"
+"""The library's record of a kernel being compiled (not loaded from the disk cache); see :func:`compile_notices`."""
+
+
+class _CompileNotice(logging.Handler):
+    """Each compile record as one line on stderr (read at each record: a test or a caller may swap stderr)."""
+
+    def emit(self, record):
+        print(f"vibro: {record.getMessage()}", file=sys.stderr, flush=True)
+
+
+class compile_notices:
+    """While active, a Monte Carlo kernel compiled rather than loaded from the cache prints one line on stderr
+    ("vibro: compiling the Monte Carlo kernel for duffing/milstein (first run only, ~10 s)"), whether stderr is a
+    terminal, a pipe or a log: a first run's wait of seconds then does not look like a hang.
+
+    Examples
+    --------
+    >>> import contextlib, io
+    >>> err = io.StringIO()
+    >>> with contextlib.redirect_stderr(err), compile_notices():
+    ...     logging.getLogger(COMPILE_LOGGER).info("compiling the Monte Carlo kernel for m/s (first run only, ~1 s)")
+    >>> err.getvalue().splitlines()
+    ['vibro: compiling the Monte Carlo kernel for m/s (first run only, ~1 s)']
+    """
+
+    def __enter__(self):
+        self._logger = logging.getLogger(COMPILE_LOGGER)
+        self._level, self._handler = self._logger.level, _CompileNotice()
+        self._logger.addHandler(self._handler)
+        self._logger.setLevel(logging.INFO)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeHandler(self._handler)
+        self._logger.setLevel(self._level)
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``vibro`` with ``argv``; return the exit status.
 
@@ -199,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
                     previous(message, category, filename, lineno, file, line)
 
             warnings.showwarning = one_line
-            status = args.func(args)
+            with compile_notices():
+                status = args.func(args)
             sys.stdout.flush()  # a closed pipe shows up here, inside the handler, not at interpreter exit
     except BrokenPipeError:
         return _stdout_gone()
