@@ -66,3 +66,13 @@ def test_first_mc_run_into_a_pipe_says_it_compiles(tmp_path):
     second = subprocess.run(argv + ["--out", str(tmp_path / "b.csv")], capture_output=True, text=True, env=env,
                             timeout=300)
     assert second.returncode == 0 and "compiling" not in second.stderr
+
+
+def test_a_kernel_family_without_a_measured_compile_time_claims_none(tmp_path, monkeypatch, caplog):
+    monkeypatch.setenv("VIBRO_CACHE_DIR", str(tmp_path))
+    name = f"vibro_cuda_tiny_{os.getpid()}"
+    with caplog.at_level(logging.INFO, logger="hybrid.stochastic.compile"):
+        _load_fresh(name).run_chunks(1.0)
+    notes = [r for r in caplog.records if r.name == "hybrid.stochastic.compile"]
+    assert [r.getMessage() for r in notes] == ["compiling the Monte Carlo kernel for tiny/test (first run only)"]
+    assert notes[0].estimate_s is None
