@@ -382,6 +382,13 @@ class StationaryDensity:
         return (f"StationaryDensity(model={self.model.name!r}, method={self.method!r}, points={len(self.H)}, "
                 f"E[H]={self.mean_energy:.6g}, P(H<G)={self.prob_below_barrier:.6g})")
 
+    def _repr_html_(self) -> str:
+        from hybrid.display import summary_html
+
+        return summary_html(f"StationaryDensity of {self.model.name} ({self.method})", {
+            "points on [0, h_max]": f"{len(self.H)} on [0, {self.h_max:g}]", "E[H]": self.mean_energy,
+            "P(H < G(delta))": self.prob_below_barrier, "E[x^2]": self.mean_x2, "impact rate": self.impact_rate})
+
 
 _LOG_DROP = 40.0
 """Beyond the energy where p(H) has fallen by e**-40 from its peak the mass is negligible (below about 1e-16)."""

@@ -60,6 +60,8 @@ def test_mc_orbit_and_solve_write_provenance(tmp_path, capsys):
     rec = _sidecar(h)
     assert rec["settings"]["seed"] == 1 and rec["settings"]["chunk_paths"] >= 1 and rec["settings"]["dt"] == 0.02
     assert "same seed and chunk_paths" in rec["settings"]["reproducible_as"]
+    assert rec["noise"]["noises"] == 1 and rec["noise"]["states"] == 2 and not rec["noise"]["multiplicative"]
+    assert "noise           1 noise, 2 states, additive" in capsys.readouterr().out
     assert json.loads(summary.read_text())["results"]["mean_energy"]["ci"] > 0
     o = tmp_path / "o.csv"
     assert main(["orbit", "--param", "c=0", "--param", "D=0", "--v0", "2.2", "--t-end", "10", "--out", str(o)]) == 0

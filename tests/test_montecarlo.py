@@ -6,6 +6,7 @@ stationary density (tests/problems.py), convergence slopes against the declared 
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -512,6 +513,12 @@ def test_cli_output_and_summary(tmp_path, capsys):
     assert (inside.density * (inside.H_hi - inside.H_lo)).sum() == pytest.approx(share)
     assert df["count"].sum() == 16 * 18000
     assert len(pd.read_csv(joint)) == 121  # 10 x 12 cells and the row of samples outside the window
+    from hybrid.errors import VibroWarning
+    from vibro.studies.plots import read_table
+
+    with pytest.warns(VibroWarning, match="1 of 121 rows"):  # the row of samples outside the window
+        assert read_table(joint).barriers == (-1.0, 1.0)  # from the joint's own sidecar
+    assert json.loads(joint.with_suffix(".json").read_text())["settings"]["xy_bins"] == [10, 12]
     text = capsys.readouterr().out
     for key in ("M path-steps/s", "E[H]", "P(H < G(delta))", "impacts/time", "±"):
         assert key in text

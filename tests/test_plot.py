@@ -165,3 +165,8 @@ def test_real_pdf_outputs_plot(tmp_path, capsys):
     assert main(["plot", str(p), "--out", str(tmp_path / "p.png"), "--barrier-energy", "0.55"]) == 0
     assert main(["plot", str(j), "--out", str(tmp_path / "j.png"), "--barriers", "-1", "1"]) == 0
     assert _is_png(tmp_path / "p.png") and _is_png(tmp_path / "j.png")
+    # the joint CSV has its own sidecar: the barriers are found without --barriers
+    from vibro.studies.plots import read_table
+
+    assert read_table(j).barriers == (-1.0, 1.0) and read_table(j).barrier_energy == pytest.approx(0.55)
+    assert main(["plot", str(j), "--out", str(tmp_path / "j2.png")]) == 0 and _is_png(tmp_path / "j2.png")

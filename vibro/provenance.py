@@ -67,8 +67,67 @@ def _jsonable(value):
     return str(value)
 
 
+def noise_assumption(model) -> dict | None:
+    """How many noises and states ``model`` has, and how its noise is read (the convention, said for every run).
+
+    The Monte Carlo kernels, the averaging methods and fpk all read the noise as Stratonovich (physical white noise:
+    the Itô drift gains the Wong-Zakai term). With additive noise (no f_k depends on the state) Itô and Stratonovich
+    agree, so the convention does not matter; with multiplicative noise it changes the answer.
+
+    Parameters
+    ----------
+    model : ImpactOscillator or HybridAutomaton
+        Anything else gives None.
+
+    Returns
+    -------
+    dict or None
+        ``noises``, ``states``, ``convention``, ``multiplicative``, ``depends_on`` (the states the noise
+        coefficients depend on) and ``text``, a one-line summary.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> noise_assumption(ImpactOscillator("x", "c*y", noise=("1", "y"), parameters={"c": 0.1, "D": 0.05},
+    ...                                   barriers=None))["text"]
+    '2 noises, 2 states, Stratonovich (multiplicative: f depends on y)'
+    >>> noise_assumption(ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.05},
+    ...                                   barriers=None))["text"]
+    '1 noise, 2 states, additive (Itô and Stratonovich agree)'
+    """
+    from hybrid.automaton import HybridAutomaton
+    from models import ImpactOscillator
+
+    if isinstance(model, ImpactOscillator):
+        from models.oscillator import X, Y
+
+        states = (X, Y)
+        coefficients = [model.substitute(f) for f in model.f]
+        noises = len(coefficients)
+    elif isinstance(model, HybridAutomaton):
+        from hybrid.stochastic._auto_codegen import noise_matrix
+
+        states = tuple(model.states)
+        matrices = [noise_matrix(mode, len(states)) for mode in model.modes]
+        coefficients = [e for G in matrices for e in G]
+        noises = max((G.shape[1] for G in matrices if any(e != 0 for e in G)), default=0)
+    else:
+        return None
+    symbols = set().union(*(getattr(e, "free_symbols", set()) for e in coefficients)) if coefficients else set()
+    depends_on = [s.name for s in states if s in symbols]
+    head = f"{noises} noise{'' if noises == 1 else 's'}, {len(states)} state{'' if len(states) == 1 else 's'}"
+    if noises == 0:
+        text = f"{head} (deterministic)"
+    elif depends_on:
+        text = f"{head}, Stratonovich (multiplicative: f depends on {', '.join(depends_on)})"
+    else:
+        text = f"{head}, additive (Itô and Stratonovich agree)"
+    return {"noises": noises, "states": len(states), "convention": "stratonovich", "multiplicative": bool(depends_on),
+            "depends_on": depends_on, "text": text}
+
+
 def record(kind: str, *, model=None, settings: dict | None = None, results: dict | None = None,
-           started: float | None = None, argv: list[str] | None = None) -> dict:
+           started: float | None = None, argv: list[str] | None = None, noise: dict | None = None) -> dict:
     """The provenance record of one output.
 
     Parameters
@@ -85,6 +144,8 @@ def record(kind: str, *, model=None, settings: dict | None = None, results: dict
         ``time.perf_counter()`` at the start; the wall time is measured from it.
     argv : list of str, optional
         The command line (default: ``sys.argv``).
+    noise : dict, optional
+        The noise and its convention (default: :func:`noise_assumption` of ``model``).
 
     Examples
     --------
@@ -98,6 +159,7 @@ def record(kind: str, *, model=None, settings: dict | None = None, results: dict
         "command": list(sys.argv if argv is None else argv),
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "model": model.describe() if model is not None else None,
+        "noise": noise if noise is not None else (noise_assumption(model) if model is not None else None),
         "settings": settings or {},
         "results": results or {},
         "wall_time_s": None if started is None else time.perf_counter() - started,

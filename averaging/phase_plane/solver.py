@@ -255,6 +255,15 @@ class PhaseDensity:
         return (f"PhaseDensity(model={self.model.name!r}, method='fpk', cells={self.grid.n}, "
                 f"E[H]={self.mean_energy:.6g}, impact_rate={self.impact_rate:.6g})")
 
+    def _repr_html_(self) -> str:
+        from hybrid.display import summary_html
+
+        rows = {"cells": self.grid.n, "E[H]": self.mean_energy, "P(H < G(delta))": self.prob_below_barrier,
+                "E[x^2]": self.mean_x2, "impact rate": self.impact_rate, "residual": self.residual}
+        if self.error_estimate is not None:
+            rows["estimated L1 error of p(H)"] = self.error_estimate
+        return summary_html(f"PhaseDensity of {self.model.name} (fpk)", rows)
+
 
 def _coefficients(model, law):
     sub = model.substitute

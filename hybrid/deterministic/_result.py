@@ -58,6 +58,11 @@ class ImpactLog:
     def __len__(self) -> int:
         return len(self.t)
 
+    def __repr__(self) -> str:
+        span = f", t={float(self.t[0]):.6g}..{float(self.t[-1]):.6g}" if len(self.t) else ""
+        kinds = {str(k): int(n) for k, n in zip(*np.unique(self.transition, return_counts=True))}
+        return f"ImpactLog({len(self.t)} transitions{span}, {kinds})"
+
     @property
     def x(self) -> np.ndarray:
         """Impact positions (first state variable)."""
@@ -125,6 +130,10 @@ class Trajectory:
     y: np.ndarray
     mode: np.ndarray
     state_names: tuple = ()
+
+    def __repr__(self) -> str:
+        span = f", t={float(self.t[0]):.6g}..{float(self.t[-1]):.6g}" if len(self.t) else ""
+        return f"Trajectory({len(self.t)} samples of {list(self.state_names)}{span})"
 
     def to_pandas(self):
         """DataFrame with columns ``t``, one per state, and ``mode``."""
@@ -205,3 +214,10 @@ class OrbitResult:
     def __repr__(self) -> str:
         return (f"OrbitResult(status={self.status!r}, t={self.t:.6g}, n_impacts={self.n_impacts}, "
                 f"n_steps={self.n_steps}, backend={self.backend!r})")
+
+    def _repr_html_(self) -> str:
+        from hybrid.display import summary_html
+
+        return summary_html(f"OrbitResult ({self.backend})", {
+            "status": self.status, "message": self.message, "t": self.t, "impacts": self.n_impacts,
+            "steps": self.n_steps, "wall time (s)": self.wall_time})

@@ -324,16 +324,38 @@ class AutomatonEnsemble:
             None if self.event_totals is None else np.concatenate([self.event_totals, other.event_totals]),
         )
 
-    def to_pandas(self, name: str):
-        """Histogram of one observable as a DataFrame (lo, hi, count, density), with underflow/overflow rows."""
+    def to_pandas(self, name: str | None = None):
+        """Histogram of one observable (default: the first) as a DataFrame (lo, hi, count, density), with
+        underflow/overflow rows."""
         import pandas as pd
 
+        if name is None:
+            name = next((nm for nm in self.names if nm in self.counts), None)
+            if name is None:
+                raise ParameterError(f"no observable of {list(self.names)} was histogrammed; give histograms=")
         e, d = self.density(name)
         c = self.counts[name]
         lo = np.concatenate([[-np.inf], e[:-1], [e[-1]]])
         hi = np.concatenate([[e[0]], e[1:], [np.inf]])
         dens = np.concatenate([[np.nan], d, [np.nan]])
         return pd.DataFrame({"lo": lo, "hi": hi, "count": c, "density": dens})
+
+    def __repr__(self) -> str:
+        means = ", ".join(f"E[{nm}]={self.mean(nm)}" for nm in self.names[:3])
+        more = f", ... {len(self.names) - 3} more" if len(self.names) > 3 else ""
+        firings = ", ".join(f"{t}={int(k)}" for t, k in zip(self.transitions[:4], self.events[:4]))
+        return (f"AutomatonEnsemble(scheme={self.settings.get('scheme')!r}, dt={self.settings.get('dt')}, "
+                f"paths={self.settings.get('paths')}, {means}{more}" + (f", firings: {firings}" if firings else "")
+                + ")")
+
+    def _repr_html_(self) -> str:
+        from hybrid.display import summary_html
+
+        rows = {"paths": self.settings.get("paths"), "samples": self.flags.get("samples")}
+        rows.update({f"E[{nm}] (95% CI)": str(self.mean(nm)) for nm in self.names})
+        rows.update({f"rate {t} (per unit time)": self.rate(t) for t in self.transitions})
+        rows["wall time (s)"] = self.wall_time
+        return summary_html(f"AutomatonEnsemble ({self.settings.get('scheme')}, dt={self.settings.get('dt')})", rows)
 
     def summary(self) -> dict:
         """Means with CIs, rates per transition and the counters, as plain numbers."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import inspect
+import logging
 import os
 import sys
 import textwrap
@@ -625,6 +626,49 @@ def callable_digest(fn) -> str | None:
 
 
 _LOADED: dict[str, types.ModuleType] = {}
+
+COMPILE_LOG = logging.getLogger("hybrid.stochastic.compile")
+"""An INFO record each time a Monte Carlo kernel is compiled rather than loaded from numba's disk cache, before the
+compilation starts (``extra``: ``kernel``, e.g. ``duffing/milstein``, and ``estimate_s``). The library prints nothing
+by itself; the command line turns the record into one line on stderr, so a first run's wait is not a silent one."""
+
+COMPILE_ESTIMATE_S = {"vibro_mc": 10, "vibro_auto": 20}
+"""About how long a cold compile takes, by kernel family (measured on 2 busy cores: oscillator ~7-10 s, automaton
+~15-20 s); only said to the user. The CUDA kernels (``vibro_cuda``) are not measured here: no estimate is said."""
+
+
+def _label(name: str) -> str:
+    """``duffing/milstein``-like words for a kernel module without a model name: the family and the scheme."""
+    parts = name.split("_")
+    if name.startswith("vibro_auto_") and len(parts) > 3:
+        return f"automaton/{'_'.join(parts[2:-1])}"
+    return name
+
+
+def _announce_compiles(module, label: str) -> None:
+    """Log one :data:`COMPILE_LOG` record when one of ``module``'s kernels misses numba's cache (it is then compiled).
+
+    numba asks its cache (``load_overload``) just before it compiles a signature; a miss means a compile follows.
+    Only the module's own dispatchers are watched (helpers imported from elsewhere keep theirs).
+    """
+    announced = []
+    estimate = next((s for family, s in COMPILE_ESTIMATE_S.items() if module.__name__.startswith(family + "_")), None)
+    when = "first run only" if estimate is None else f"first run only, ~{estimate} s"
+    for obj in list(vars(module).values()):
+        cache = getattr(obj, "_cache", None)
+        load = getattr(cache, "load_overload", None)
+        if load is None or getattr(getattr(obj, "py_func", None), "__module__", None) != module.__name__:
+            continue
+
+        def announcing(sig, target_context, _load=load):
+            result = _load(sig, target_context)
+            if result is None and not announced:
+                announced.append(True)
+                COMPILE_LOG.info("compiling the Monte Carlo kernel for %s (%s)", label, when,
+                                 extra={"kernel": label, "estimate_s": estimate})
+            return result
+
+        cache.load_overload = announcing
 _USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused
 _RNG_HASH = hashlib.sha256(inspect.getsource(_rng).encode()).hexdigest()[:8]
 
@@ -634,10 +678,11 @@ def _module_name(model, scheme, src: str) -> str:
     return f"vibro_mc_{scheme.name}_{model.fingerprint()}_{h}"
 
 
-def load_source(name: str, src: str, user_law=None) -> tuple[types.ModuleType, Path | None]:
+def load_source(name: str, src: str, user_law=None, label: str | None = None) -> tuple[types.ModuleType, Path | None]:
     """Import generated source ``src`` as module ``name`` from the cache directory (written atomically once).
 
-    A user-callable restitution law cannot be cached on disk: that module is built in memory.
+    A user-callable restitution law cannot be cached on disk: that module is built in memory. ``label`` names the
+    kernel in the :data:`COMPILE_LOG` record of a compile (default: from ``name``).
     """
     if name in _LOADED:
         return _LOADED[name], getattr(_LOADED[name], "__file__", None)
@@ -645,6 +690,7 @@ def load_source(name: str, src: str, user_law=None) -> tuple[types.ModuleType, P
         module = types.ModuleType(name)
         module.__dict__["_user_law"] = user_law
         exec(compile(src, f"<{name}>", "exec"), module.__dict__)
+        _announce_compiles(module, label or _label(name))
         _LOADED[name] = module
         return module, None
     directory = cache_dir()
@@ -668,6 +714,7 @@ def load_source(name: str, src: str, user_law=None) -> tuple[types.ModuleType, P
     sys.modules[name] = module
     spec.loader.exec_module(module)
     _rebuild_on_corrupt_cache(module)
+    _announce_compiles(module, label or _label(name))
     _LOADED[name] = module
     return module, path
 
@@ -710,7 +757,7 @@ def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel
         fn = model.restitution.callable
         _USER_LAWS.setdefault(id(fn), fn)
         name += f"_law{id(fn):x}"
-    module, path = load_source(name, src, user_law)
+    module, path = load_source(name, src, user_law, label=f"{model.name}/{scheme.name}")
     # what identifies the computation (for checkpoints): the source (not the numba version: a resume after an
     # upgrade is allowed), the law's numbers in full precision, and a callable law's code
     identity = {

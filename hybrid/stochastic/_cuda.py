@@ -410,7 +410,7 @@ def build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision="f64") -> Cuda
     sim = "sim" if sim else "dev"
     h = hashlib.sha256((src + _RNG_HASH + nb.__version__ + np.__version__ + sim).encode()).hexdigest()[:16]
     name = f"vibro_cuda_{scheme.name}_{model.fingerprint()}_{h}"
-    module, _ = _codegen.load_source(name, src)
+    module, _ = _codegen.load_source(name, src, label=f"{model.name}/{scheme.name} (CUDA, {precision})")
     return CudaKernel(module, src, tuple(model.params), law_values, lanes, precision)
 
 

@@ -164,7 +164,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
         j_lo=np.array([xlo, ylo], dtype=float), j_scale=np.array(xy_scales, dtype=float),
         j_bins=np.array([nx, ny], dtype=np.int64), v_scale=v_scale, v_bins=s["v_bins"], phases=0, phase_steps=1,
     )
-    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
+    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes, label=f"{model.name}/{auto_scheme}")
     module = job.module()
     job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
     # the law's numbers in full precision (they are parameters of the kernel, not in its source)

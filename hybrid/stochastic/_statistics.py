@@ -399,4 +399,12 @@ class EnsembleStatistics:
         return (f"EnsembleStatistics(scheme={self.settings.get('scheme')!r}, dt={self.settings.get('dt')}, "
                 f"paths={self.paths}, E[H]={self.mean_energy}, impacts={self.impacts})")
 
+    def _repr_html_(self) -> str:
+        from hybrid.display import summary_html
+
+        return summary_html(f"EnsembleStatistics ({self.settings.get('scheme')}, dt={self.settings.get('dt')})", {
+            "paths": self.paths, "path-steps": f"{self.path_steps:.4g}", "E[H] (95% CI)": str(self.mean_energy),
+            "P(H < G(delta))": str(self.prob_below_barrier), "impacts per unit time": str(self.impact_rate),
+            "impacts": self.impacts, "wall time (s)": self.wall_time})
+
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import os
 import pkgutil
 import re
@@ -42,8 +43,22 @@ class DefaultsFormatter(argparse.HelpFormatter):
             return text
         default = action.default
         if isinstance(default, (list, tuple)):
-            default = " ".join(str(v) for v in default) if default else "none"
-        return f"{text} (default: {'none' if default is None else default})"
+            default = " ".join(format_number(v) for v in default) if default else "none"
+        return f"{text} (default: {'none' if default is None else format_number(default)})"
+
+
+def format_number(value) -> str:
+    """A default as a user would type it: whole numbers without '.0', large ones as '1e13', others exactly.
+
+    Examples
+    --------
+    >>> format_number(1e13), format_number(2200.0), format_number(0.001), format_number(0.1 + 0.2), format_number(8)
+    ('1e13', '2200', '0.001', '0.30000000000000004', '8')
+    """
+    if not isinstance(value, float) or value != value or value in (float("inf"), float("-inf")):
+        return str(value)
+    short = f"{value:g}"
+    return short.replace("e+", "e") if float(short) == value else repr(value)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -166,6 +181,45 @@ def progress_mode(flag: bool | None, stream=None) -> str:
         return "lines"
 
 
+COMPILE_LOGGER = "hybrid.stochastic.compile"
+"""The library's record of a kernel being compiled (not loaded from the disk cache); see :func:`compile_notices`."""
+
+
+class _CompileNotice(logging.Handler):
+    """Each compile record as one line on stderr (read at each record: a test or a caller may swap stderr)."""
+
+    def emit(self, record):
+        print(f"vibro: {record.getMessage()}", file=sys.stderr, flush=True)
+
+
+class compile_notices:
+    """While active, a Monte Carlo kernel compiled rather than loaded from the cache prints one line on stderr
+    ("vibro: compiling the Monte Carlo kernel for duffing/milstein (first run only, ~10 s)"), whether stderr is a
+    terminal, a pipe or a log: a first run's wait of seconds then does not look like a hang.
+
+    Examples
+    --------
+    >>> import contextlib, io
+    >>> err = io.StringIO()
+    >>> with contextlib.redirect_stderr(err), compile_notices():
+    ...     logging.getLogger(COMPILE_LOGGER).info("compiling the Monte Carlo kernel for m/s (first run only, ~1 s)")
+    >>> err.getvalue().splitlines()
+    ['vibro: compiling the Monte Carlo kernel for m/s (first run only, ~1 s)']
+    """
+
+    def __enter__(self):
+        self._logger = logging.getLogger(COMPILE_LOGGER)
+        self._level, self._handler = self._logger.level, _CompileNotice()
+        self._logger.addHandler(self._handler)
+        self._logger.setLevel(logging.INFO)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeHandler(self._handler)
+        self._logger.setLevel(self._level)
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``vibro`` with ``argv``; return the exit status.
 
@@ -185,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
                     previous(message, category, filename, lineno, file, line)
 
             warnings.showwarning = one_line
-            status = args.func(args)
+            with compile_notices():
+                status = args.func(args)
             sys.stdout.flush()  # a closed pipe shows up here, inside the handler, not at interpreter exit
     except BrokenPipeError:
         return _stdout_gone()

@@ -131,11 +131,14 @@ def run(args) -> int:
                                    "workers or launches"}
     rec = record("mc", model=model, settings=settings, results=stats.summary(), started=started)
     write_sidecar(args.out, rec)
+    if args.joint:  # its own record, so that vibro plot finds the barriers beside the joint CSV too
+        write_sidecar(args.joint, joint_record(rec, args.xy_bins))
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
     g = stats.settings["g_barrier"]
     print(f"vibro mc: {stats.settings['scheme']} dt={stats.settings['dt']:g} paths={stats.paths} "
           f"seed={stats.seed} path-steps={stats.path_steps:.4g}")
+    print(f"  noise           {rec['noise']['text']}")
     print(f"  throughput      {stats.throughput / 1e6:.1f} M path-steps/s  (wall {stats.wall_time:.2f} s, "
           f"compile/load {stats.compile_time:.2f} s)")
     print(f"  E[H]            {stats.mean_energy:.6g}   (± = 95% batch-means CI)")
@@ -160,6 +163,11 @@ def run(args) -> int:
     return 0
 
 
+def joint_record(rec: dict, xy_bins) -> dict:
+    """The provenance of the ``--joint`` histogram: the run's record, saying which output it describes."""
+    return {**rec, "output": "joint", "settings": {**rec["settings"], "xy_bins": list(xy_bins)}}
+
+
 def plan_outputs(args):
     """The files and folder ``vibro mc`` writes, checked together (writable, no two on one file) before the run."""
     from pathlib import Path
@@ -172,7 +180,7 @@ def plan_outputs(args):
     plan = output_plan(args)
     plan.file(args.out, "--out", sidecar=True)
     if args.joint:
-        plan.file(args.joint, "--joint")
+        plan.file(args.joint, "--joint", sidecar=True)
     if args.summary_json:
         plan.file(args.summary_json, "--summary-json")
     if args.checkpoint is not None:
@@ -287,6 +295,8 @@ def _run_forced(args, model, started, plan) -> int:
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
     rec = record("mc", model=model, settings=settings, results=results, started=started)
     write_sidecar(args.out, rec)
+    if args.joint:
+        write_sidecar(args.joint, joint_record(rec, args.xy_bins))
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
     steps = ens.settings["paths"] * ens.settings["t_end"] / ens.settings["dt"]
@@ -294,6 +304,7 @@ def _run_forced(args, model, started, plan) -> int:
                f"{ens.settings['phase_steps']} steps)" if args.phases else "")
     print(f"vibro mc: {args.scheme} ({scheme}) dt={ens.settings['dt']:.10g}{dt_note} paths={args.paths} "
           f"seed={args.seed} path-steps={steps:.4g}  (forced model: automaton kernel)")
+    print(f"  noise           {rec['noise']['text']}")
     print(f"  forcing         F = {model.forcing}" + (f", period {period:.10g}" if period else ""))
     print(f"  throughput      {steps / max(ens.wall_time, 1e-9) / 1e6:.1f} M path-steps/s  (wall "
           f"{ens.wall_time:.2f} s)")

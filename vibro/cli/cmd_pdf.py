@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from averaging import stationary_density
     from averaging.quadrature import turning_points
     from hybrid.errors import ModelError, VibroWarning
-    from vibro.provenance import record, sidecar_path, write_sidecar
+    from vibro.provenance import noise_assumption, record, sidecar_path, write_sidecar
 
     from .common import model_from_args
 
@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     plan = output_plan(args)  # checked before the work: a bad path costs nothing
     plan.file(args.out, "--out", sidecar=True)
     if args.joint is not None:
-        plan.file(args.joint, "--joint")
+        plan.file(args.joint, "--joint", sidecar=True)
     model = model_from_args(args)
     if args.equations is not None:
         from averaging import averaging_equations
@@ -184,8 +184,13 @@ def run(args: argparse.Namespace) -> int:
     settings = {"method": args.method, "h_max": args.h_max, "points": args.points, "force": args.force}
     if args.method == "fpk":
         settings["grid"] = list(args.grid)
-    write_sidecar(args.out, record("pdf", model=model, settings=settings, results=results, started=started))
+    rec = record("pdf", model=model, settings=settings, results=results, started=started)
+    write_sidecar(args.out, rec)
+    if args.joint is not None:  # its own record, so that vibro plot finds the barriers beside the joint CSV too
+        write_sidecar(args.joint, {**rec, "output": "joint",
+                                   "settings": {**rec["settings"], "joint_points": args.joint_points}})
     print(f"model {model.name} {dict(model.params)} restitution {model.restitution.spec()} method {args.method}")
+    print(f"noise: {noise_assumption(model)['text']}")
     print(f"E[H] = {sd.mean_energy:.8g}")
     if walls:
         print(f"P(H < G(delta)) = {sd.prob_below_barrier:.8g}   (G(delta) = {Gd:.8g})")
@@ -193,5 +198,5 @@ def run(args: argparse.Namespace) -> int:
         print("no walls: no impacts, P(H < G(delta)) = 1")
     print(f"E[x^2] = {sd.mean_x2:.8g}   impact rate = {sd.impact_rate:.8g}")
     print(f"wrote {args.out} ({len(sd.H)} rows)" + (f" and {args.joint}" if args.joint else "")
-          + f"; provenance in {sidecar_path(args.out)}")
+          + f"; provenance in {sidecar_path(args.out)}" + (f" and {sidecar_path(args.joint)}" if args.joint else ""))
     return 0

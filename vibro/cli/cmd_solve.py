@@ -59,6 +59,9 @@ def run(args) -> int:
         output_plan(args).file(args.out, "--out", sidecar=True)
     model = model_from_args(args)
     print(f"model: {model!r}")
+    from vibro.provenance import noise_assumption
+
+    print(f"noise: {noise_assumption(model)['text']}")
     if not any(math.isfinite(v) for v in model.barriers):  # e.g. --param delta=inf: say what the inf means
         print("walls: none (barriers at infinity: no impacts)")
     if args.dry_run:

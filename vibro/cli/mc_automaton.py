@@ -211,7 +211,7 @@ def run(args, resolved, plan) -> int:
     from hybrid.stochastic import atomic_write_text, simulate_automaton
     from hybrid.stochastic._auto_codegen import analyse
     from models.automata import describe_automaton
-    from vibro.provenance import record, write_sidecar
+    from vibro.provenance import noise_assumption, record, write_sidecar
 
     from .density_check import check_observable_histogram
 
@@ -320,13 +320,15 @@ def run(args, resolved, plan) -> int:
     description = automaton.describe() if hasattr(automaton, "describe") else describe_automaton(automaton)
     if base is not None and not args.filter:  # a filtered model carries its base model already
         description["oscillator"] = base
-    rec = record("mc", model=_Described(description), settings=settings, results=results, started=started)
+    rec = record("mc", model=_Described(description), settings=settings, results=results, started=started,
+                 noise=noise_assumption(automaton))
     write_sidecar(args.out, rec)
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
 
     print(f"vibro mc: automaton {scheme} dt={args.dt:g} paths={args.paths} seed={args.seed} "
           f"states={[s.name for s in automaton.states]}")
+    print(f"  noise           {rec['noise']['text']}")
     print(f"  wall            {ens.wall_time:.2f} s")
     for name in names:
         est = ens.mean(name)

@@ -57,7 +57,20 @@ class Solution:
 
         return pd.DataFrame({"H": self.H, "p": self.p})
 
+    def __repr__(self) -> str:
+        return (f"Solution(method={self.method!r}, points={len(self.H)}, "
+                f"expected_error={self.choice.expected_error:.3g}, estimated_error={self.estimated_error:.3g}, "
+                f"wall_time={self.wall_time:.3g})")
+
+    def _repr_html_(self) -> str:
+        from hybrid.display import summary_html
+
+        return summary_html(f"Solution by {self.method}", {
+            "reason": self.choice.reason, "points": len(self.H), "expected L1 error": self.choice.expected_error,
+            "estimated L1 error": self.estimated_error, "wall time (s)": self.wall_time})
+
     def summary(self) -> str:
+        """The choice, its reason, the wall time and the estimated error, as printed by ``vibro solve``."""
         return (self.choice.summary() + f"\nmeasured wall time: {self.wall_time:.3g} s"
                 + f"\nestimated L1 error: {self.estimated_error:.3g}")
 
