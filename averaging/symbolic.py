@@ -193,8 +193,9 @@ class AveragingEquations:
         names = tuple(self.model.params)
         syms = [self.model.parameter_symbols[k] for k in names]
         args = [X, S, *syms]
-        drift = sp.lambdify(args, self._w_drift, modules="numpy")
-        diffusion = sp.lambdify(args, self._w_diffusion, modules="numpy")
+        # dummify: the orbit variable s and a user's parameter named s are two symbols with one name
+        drift = sp.lambdify(args, self._w_drift, modules="numpy", dummify=True)
+        diffusion = sp.lambdify(args, self._w_diffusion, modules="numpy", dummify=True)
         return _Kernels(drift, diffusion, names)
 
     @cached_property

@@ -96,3 +96,14 @@ def test_the_cases_that_found_defects():
                             h_max=4.0, points=300)
     assert sd.p[0] == pytest.approx(sd.p[1], rel=0.02)
     assert float(np.trapezoid(sd.p, sd.H)) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_parameter_names_that_the_generated_code_uses_too():
+    # the averaging's orbit variable is a sympy symbol 's': a parameter named s was a SyntaxError (duplicate
+    # argument) in its numpy kernels; every name gives the answer of the same model with another name
+    answers = set()
+    for name in ("k", "s", "p", "dt", "np"):
+        model = ImpactOscillator(f"{name}*x", "c*y", intensity="D",
+                                 parameters={name: 1.0, "c": 0.05, "D": 0.05, "delta": 1.0})
+        answers.add(round(stationary_density(model, "jump", points=300).mean_energy, 12))
+    assert len(answers) == 1
