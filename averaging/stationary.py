@@ -399,9 +399,10 @@ TAIL_WARN = 1e-3
 _MAX_POINTS = 10_000_000
 
 
-ENERGY_RANGE = 1e12
-"""How far ``h_max`` may lie from the model's energy scale (G(delta), or G(1) without walls), up or down: beyond,
-double precision cannot hold the density's grid and quadrature (h_max = 1e300 overflowed the coefficients, 1e-300
+ENERGY_RANGE = 1e15
+"""How far ``h_max`` may lie from the model's energy scale (G(delta), or G(1) without walls), up or down (every
+method answers at 1e15 times the scale both ways, as at a moderate h_max): beyond, double precision cannot hold the
+density's grid and quadrature (h_max = 1e300 overflowed the coefficients, 1e-300
 underflowed them, and each was refused with a message about the model instead of h_max)."""
 
 
