@@ -201,8 +201,6 @@ def _phases_path(args):
 
 def _run_forced(args, model, started, plan) -> int:
     """A forced model: Monte Carlo of its automaton (simulate_automaton), time-averaged and phase-resolved."""
-    import math
-
     import numpy as np
     import pandas as pd
 

@@ -19,9 +19,7 @@ def _h_max_fix(mean_energy: float) -> str:
 
 def check_energy_histogram(path, edges, counts, mean_energy: float) -> bool:
     """Warn unless the H histogram written to ``path`` resolves its samples (names --h-max and --bins)."""
-
-    return check_density(f"the H histogram in {path}", [edges], counts,
-                         hint=lambda spreads: _energy_fix(spreads[0], mean_energy), stacklevel=3)
+    return check_observable_histogram(path, "H", edges, counts, mean_energy, stacklevel=4)
 
 
 def check_xy_histogram(path, x_edges, y_edges, counts_yx, mean_energy: float) -> bool:
@@ -41,7 +39,7 @@ def check_xy_histogram(path, x_edges, y_edges, counts_yx, mean_energy: float) ->
                          axes=["x", "y"], hint=hint, stacklevel=3)
 
 
-def check_observable_histogram(path, name: str, edges, counts, mean: float) -> bool:
+def check_observable_histogram(path, name: str, edges, counts, mean: float, stacklevel: int = 3) -> bool:
     """Warn unless the histogram of observable ``name`` written to ``path`` resolves its samples (names --range)."""
 
     def hint(spreads: dict) -> str:
@@ -52,7 +50,8 @@ def check_observable_histogram(path, name: str, edges, counts, mean: float) -> b
         return (f"use --range {name}={s.lo - half:.4g}:{s.hi + half:.4g}:{s.total_cells} (around the samples) or "
                 f"--range {name}={s.start:.4g}:{s.stop:.4g}:{s.cells_needed()}")
 
-    return check_density(f"the {name} histogram in {path}", [edges], counts, axes=[name], hint=hint, stacklevel=3)
+    return check_density(f"the {name} histogram in {path}", [edges], counts, axes=[name], hint=hint,
+                         stacklevel=stacklevel)
 
 
 def _energy_fix(s: AxisSpread, mean_energy: float) -> str:
