@@ -12,8 +12,10 @@ def add_model_arguments(parser: argparse.ArgumentParser, restitution_default: st
     from .names import MODELS
 
     parser.add_argument(
-        "--model", default="duffing", metavar="NAME|FILE.py:CLASS",
-        help=f"built-in model ({', '.join(sorted(MODELS))}) or a user class, path/to/file.py:ClassName",
+        "--model", default="duffing", metavar="NAME|FILE.py:NAME",
+        help=f"built-in model ({', '.join(sorted(MODELS))}) or path/to/file.py:NAME, where NAME is an "
+             "ImpactOscillator subclass or instance, a HybridAutomaton (vibro mc), or a function or class returning "
+             "one; the command says which it found",
     )
     parser.add_argument(
         "--param", action="append", default=[], metavar="NAME=VALUE",
@@ -95,57 +97,90 @@ def _user_attribute(spec: str, what: str):
 _USER_MODULES: dict = {}
 
 
-def load_model_class(spec: str):
-    """The model class for ``spec``: a registered name, or ``path/to/file.py:ClassName``.
+def load_model(spec: str):
+    """What ``--model`` names, and in words what was found there: one meaning for every command.
+
+    ``spec`` is a built-in name (an oscillator such as ``duffing``, or an automaton such as ``impact_pair``) or
+    ``path/to/file.py:NAME``, where ``NAME`` is an ``ImpactOscillator`` subclass, an ``ImpactOscillator`` instance,
+    a ``HybridAutomaton`` instance, or a function or class that returns one of these when called without arguments.
+
+    Returns
+    -------
+    obj : type or ImpactOscillator or HybridAutomaton
+        An ``ImpactOscillator`` subclass (not yet built, so that ``--param`` and ``--restitution`` apply to its
+        defaults), an ``ImpactOscillator`` instance, or a ``HybridAutomaton``.
+    found : str
+        What ``NAME`` turned out to be, e.g. ``"an ImpactOscillator subclass (built with its defaults)"``.
 
     Examples
     --------
-    >>> load_model_class("duffing").__name__
-    'DuffingImpact'
-    """
-    from models import MODELS, ImpactOscillator
-
-    if spec in MODELS:
-        return MODELS[spec]
-    path, cls_name, cls = _user_attribute(spec, f"one of {sorted(MODELS)}")
-    if not (isinstance(cls, type) and issubclass(cls, ImpactOscillator)):
-        raise ParameterError(f"{path!r} has no ImpactOscillator subclass named {cls_name!r}")
-    return cls
-
-
-def load_model_object(spec: str):
-    """What ``--model`` names, for commands that also run automata (``vibro mc``).
-
-    Returns an ``ImpactOscillator`` subclass (built-in name or a class in a file), or a ``HybridAutomaton``: a
-    built-in automaton (``impact_pair``, ``vibrating_table``), an instance in a file, or what a function or class in
-    a file returns when called without arguments.
-
-    Examples
-    --------
-    >>> load_model_object("impact_pair").transitions[0].name
-    'hit_right'
+    >>> obj, found = load_model("impact_pair")
+    >>> obj.transitions[0].name, found
+    ('hit_right', 'the built-in automaton impact_pair')
+    >>> load_model("duffing")[1]
+    'the built-in oscillator model duffing (DuffingImpact)'
     """
     from hybrid.automaton import HybridAutomaton
     from models import MODELS, ImpactOscillator
     from models.automata import AUTOMATA
 
     if spec in MODELS:
-        return MODELS[spec]
+        return MODELS[spec], f"the built-in oscillator model {spec} ({MODELS[spec].__name__})"
     if spec in AUTOMATA:
-        return AUTOMATA[spec]()
+        return AUTOMATA[spec](), f"the built-in automaton {spec}"
     path, name, obj = _user_attribute(spec, f"one of {sorted(MODELS) + sorted(AUTOMATA)}")
     if obj is None:
         raise ParameterError(f"{path!r} has no object named {name!r}")
     if isinstance(obj, type) and issubclass(obj, ImpactOscillator):
-        return obj
-    if isinstance(obj, (HybridAutomaton, ImpactOscillator)):
-        return obj
+        return obj, "an ImpactOscillator subclass (built with its defaults)"
+    if isinstance(obj, ImpactOscillator):
+        return obj, "an ImpactOscillator instance"
+    if isinstance(obj, HybridAutomaton):
+        return obj, "a HybridAutomaton instance"
     if callable(obj):
-        obj = _call_user(obj, name)
-        if isinstance(obj, (HybridAutomaton, ImpactOscillator)):
-            return obj
-    raise ParameterError(f"{path}:{name} is not a model: give a HybridAutomaton, a function or class returning one, or "
-                         f"an ImpactOscillator subclass (got {type(obj).__name__})")
+        kind = "class" if isinstance(obj, type) else "function"
+        built = _call_user(obj, name)
+        if isinstance(built, ImpactOscillator):
+            return built, f"a {kind} returning an ImpactOscillator"
+        if isinstance(built, HybridAutomaton):
+            return built, f"a {kind} returning a HybridAutomaton"
+        raise ParameterError(f"{path}:{name}() returned {type(built).__name__!r}, not a model: it must return an "
+                             "ImpactOscillator or a HybridAutomaton")
+    raise ParameterError(f"{path}:{name} is not a model: give an ImpactOscillator subclass or instance, a "
+                         f"HybridAutomaton, or a function or class returning one (got {type(obj).__name__})")
+
+
+def load_model_class(spec: str):
+    """The oscillator model class of a built-in name (kept for callers that need the class itself).
+
+    Examples
+    --------
+    >>> load_model_class("duffing").__name__
+    'DuffingImpact'
+    """
+    from models import ImpactOscillator
+
+    obj, found = load_model(spec)
+    if isinstance(obj, type) and issubclass(obj, ImpactOscillator):
+        return obj
+    raise ParameterError(f"--model {spec}: {found}, not an ImpactOscillator subclass")
+
+
+def load_model_object(spec: str):
+    """What ``--model`` names (see :func:`load_model`), without the words.
+
+    Examples
+    --------
+    >>> load_model_object("impact_pair").transitions[0].name
+    'hit_right'
+    """
+    return load_model(spec)[0]
+
+
+def announce_model(spec: str, found: str) -> None:
+    """Say what a user file's ``NAME`` was found to be (built-in names need no note)."""
+    if ":" in str(spec):
+        print(f"model: {spec} is {found}")
 
 
 def _call_user(factory, name: str):
@@ -167,15 +202,22 @@ def _call_user(factory, name: str):
 
 
 def model_from_args(args: argparse.Namespace):
-    """Build the model named by ``args.model`` with ``args.param`` and ``args.restitution``.
+    """Build the oscillator model named by ``args.model`` with ``args.param`` and ``args.restitution``.
 
-    Parameters not given keep the model's defaults.
+    Parameters not given keep the model's defaults. ``--model`` has the meaning of :func:`load_model`; commands that
+    need an oscillator (``orbit``, ``pdf``, ``solve``) refuse an automaton in one line, naming ``vibro mc``.
     """
+    from hybrid.automaton import HybridAutomaton
     from models import parse_restitution
 
     law = parse_restitution(args.restitution) if args.restitution else None
-    cls = load_model_class(args.model)
-    model = _call_user(cls, f"model class {cls.__name__}")
+    obj, found = load_model(args.model)
+    if isinstance(obj, HybridAutomaton):
+        command = getattr(args, "command", None) or "this command"
+        raise ParameterError(f"--model {args.model}: {found}; vibro {command} needs an ImpactOscillator model "
+                             "(vibro mc runs automata)")
+    announce_model(args.model, found)
+    model = _call_user(obj, f"model class {obj.__name__}") if isinstance(obj, type) else obj
     if law is not None:
         model = model.with_restitution(law)
     params = parse_params(args.param)

@@ -65,14 +65,16 @@ def automaton_from_args(args):
     """
     from hybrid.automaton import HybridAutomaton
     from models import ImpactOscillator, parse_restitution
-    from vibro.cli.common import _call_user, load_model_object, parse_params
+    from vibro.cli.common import _call_user, announce_model, load_model, parse_params
 
-    obj = load_model_object(args.model)
+    obj, found = load_model(args.model)
     params = parse_params(args.param)
     automaton_options = args.filter or args.observable or args.range or args.x0 is not None or args.events
+    oscillator = isinstance(obj, ImpactOscillator) or (isinstance(obj, type) and issubclass(obj, ImpactOscillator))
+    if oscillator and not automaton_options:  # the oscillator route, whether the file holds a class or an instance
+        return None
+    announce_model(args.model, found)
     if isinstance(obj, type):  # an ImpactOscillator subclass
-        if not automaton_options:
-            return None
         obj = _call_user(obj, obj.__name__)
     if isinstance(obj, ImpactOscillator):
         if args.restitution:
