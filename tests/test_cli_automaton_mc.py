@@ -85,6 +85,9 @@ def test_impact_pair_from_the_command_line_meets_its_gibbs_mean_energy(tmp, caps
     assert list(z.columns) == ["z_lo", "z_hi", "count", "density"] and len(z) == 22
     tr = pd.read_csv(tmp / "h_transitions.csv")
     assert list(tr["transition"]) == ["hit_right", "hit_left"]
+    for name in ("z", "transitions"):  # every file written has its provenance sidecar, naming the output
+        side = json.loads((tmp / f"h_{name}.json").read_text())
+        assert side["output"] == name and side["settings"]["seed"] == 4 and side["model"] == rec["model"]
 
 
 def test_event_logs_from_the_command_line(tmp, capsys):
@@ -95,6 +98,7 @@ def test_event_logs_from_the_command_line(tmp, capsys):
     assert rc == 0, capsys.readouterr().err
     ev = pd.read_csv(tmp / "h_events.csv")
     assert list(ev.columns) == ["path", "k", "t", "transition", "speed"]
+    assert json.loads((tmp / "h_events.json").read_text())["output"] == "events"
     assert set(ev["path"]) == set(range(16)) and ev["k"].max() == 2 and (ev["t"] > 0).all()
     first = json.loads(summary.read_text())["results"]["first_event_time"]
     for name, rec in first.items():  # the mean over the paths whose kept firings include the transition

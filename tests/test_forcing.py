@@ -258,6 +258,10 @@ def test_vibro_mc_writes_phase_resolved_histograms(tmp_path):
     assert set(ph.observable) == {"H", "x", "y"} and sorted(ph.phase.unique()) == [0, 1, 2, 3]
     per_phase = ph[ph.observable == "x"].groupby("phase")["count"].sum()
     assert per_phase.min() > 0
+    import json
+
+    side = json.loads((tmp_path / "h_phases.json").read_text())  # its own provenance sidecar
+    assert side["output"] == "phases" and side["settings"]["phases"] == 4 and side["model"]["forcing"]
     assert not list(tmp_path.glob("*.tmp*"))  # written atomically: no temporary left
     for bad, words in ((["--param", "Omega=0"], "frequency"), (["--param", "A=nan"], "not finite"),
                        (["--scheme", "naive"], "schemes")):

@@ -131,7 +131,7 @@ def test_cli_writes_png_atomically_and_nothing_else(files, capsys):
     out_dir = files / "out"
     out_dir.mkdir()
     assert main(["plot", str(files / "p.csv"), str(files / "h.csv"), "--out", str(out_dir / "cmp.png")]) == 0
-    assert [p.name for p in out_dir.iterdir()] == ["cmp.png"]
+    assert sorted(p.name for p in out_dir.iterdir()) == ["cmp.png", "cmp.png.json"]  # the picture and its record
     assert _is_png(out_dir / "cmp.png")
 
 
@@ -165,6 +165,12 @@ def test_real_pdf_outputs_plot(tmp_path, capsys):
     assert main(["plot", str(p), "--out", str(tmp_path / "p.png"), "--barrier-energy", "0.55"]) == 0
     assert main(["plot", str(j), "--out", str(tmp_path / "j.png"), "--barriers", "-1", "1"]) == 0
     assert _is_png(tmp_path / "p.png") and _is_png(tmp_path / "j.png")
+    import json
+
+    # the picture's own record (PNG.json, apart from p.json of the CSV it draws) holds the record of its input
+    drawn = json.loads((tmp_path / "p.png.json").read_text())
+    assert drawn["kind"] == "plot"
+    assert drawn["results"]["inputs"][str(p)] == json.loads((tmp_path / "p.json").read_text())
     # the joint CSV has its own sidecar: the barriers are found without --barriers
     from vibro.studies.plots import read_table
 

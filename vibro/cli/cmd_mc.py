@@ -222,7 +222,7 @@ def _run_forced(args, model, started, plan) -> int:
             raise ParameterError(f"--phases needs a model with a periodic forcing (model {model.name!r} has "
                                  f"{'none' if not model.is_forced else 'F = ' + str(model.forcing)}); declare "
                                  "forcing='A*cos(Omega*t)'")
-        plan.file(_phases_path(args), "--phases-out")
+        plan.file(_phases_path(args), "--phases-out", sidecar=True)
     if args.scheme not in set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF):
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
                              f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")
@@ -295,6 +295,9 @@ def _run_forced(args, model, started, plan) -> int:
     write_sidecar(args.out, rec)
     if args.joint:
         write_sidecar(args.joint, joint_record(rec, args.xy_bins))
+    if args.phases:
+        write_sidecar(_phases_path(args), {**rec, "output": "phases",
+                                           "settings": {**rec["settings"], "phases": args.phases}})
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
     steps = ens.settings["paths"] * ens.settings["t_end"] / ens.settings["dt"]

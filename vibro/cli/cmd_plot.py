@@ -24,7 +24,9 @@ def register(subparsers) -> None:
                     "is one; the options below override it. Unknown columns exit with status 2.",
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="CSV files of one kind (energy, joint, impacts or paths)")
-    p.add_argument("--out", required=True, metavar="PNG", help="the picture to write (atomically; required)")
+    p.add_argument("--out", required=True, metavar="PNG",
+                   help="the picture to write (atomically; required), with its provenance in PNG.json (PNG with "
+                        ".json appended: what it draws and the records of the files drawn)")
     p.add_argument("--label", action="append", default=None, dest="labels", metavar="TEXT",
                    help="legend label, once per file in order (default: the file names)")
     p.add_argument("--barrier-energy", type=float, default=None, metavar="G",
@@ -38,10 +40,12 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     """Draw the files; bad input raises a VibroError (exit status 2)."""
+    import json
+    import time
     from pathlib import Path
 
-    from hybrid.io import OutputPlan
-    from vibro.provenance import sidecar_path
+    from hybrid.io import OutputPlan, atomic_write_text
+    from vibro.provenance import record, sidecar_path
     from vibro.studies.plots import plot_files
 
     plan = OutputPlan()  # the picture must not replace a file it draws (or the sidecar it reads)
@@ -50,8 +54,23 @@ def run(args) -> int:
         if sidecar_path(name) != Path(name):
             plan.reads(sidecar_path(name), f"sidecar {str(sidecar_path(name))!r}")
     plan.file(args.out, "--out")
+    # PNG.png.json: the picture's own record, apart from the sidecar NAME.json of a CSV named like the picture
+    picture_record = plan.file(f"{args.out}.json", "the provenance sidecar of --out")
 
+    started = time.perf_counter()
     plot_files(args.files, args.out, labels=args.labels, barrier_energy=args.barrier_energy,
                barriers=None if args.barriers is None else tuple(args.barriers), title=args.title, dpi=args.dpi)
-    print(f"wrote {args.out}")
+    # the picture's provenance: what it draws, and the records of the files it drew (where they have one)
+    inputs = {}
+    for name in dict.fromkeys(args.files):
+        side = sidecar_path(name)
+        try:
+            inputs[name] = json.loads(side.read_text(encoding="utf-8")) if side != Path(name) else None
+        except (OSError, ValueError):
+            inputs[name] = None
+    settings = {"files": list(args.files), "labels": args.labels, "barrier_energy": args.barrier_energy,
+                "barriers": args.barriers, "title": args.title, "dpi": args.dpi}
+    atomic_write_text(picture_record, json.dumps(record("plot", settings=settings, results={"inputs": inputs},
+                                                        started=started), indent=2) + "\n")
+    print(f"wrote {args.out} and {picture_record}")
     return 0

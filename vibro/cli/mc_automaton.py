@@ -238,7 +238,7 @@ def run(args, resolved, plan) -> int:
     if args.events:
         extra["events"] = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
     for name, path in extra.items():  # the files named after --out, checked before the run
-        plan.file(path, f"the {name} file of --out")
+        plan.file(path, f"the {name} file of --out", sidecar=True)
     n = len(automaton.states)
     x0 = tuple(args.x0) if args.x0 is not None else (0.0,) * n
     if len(x0) != n:
@@ -325,6 +325,8 @@ def run(args, resolved, plan) -> int:
     rec = record("mc", model=_Described(description), settings=settings, results=results, started=started,
                  noise=noise_assumption(automaton))
     write_sidecar(args.out, rec)
+    for path in files[1:]:  # every file written carries its provenance, saying which output it is
+        write_sidecar(path, {**rec, "output": Path(path).stem[len(out.stem) + 1:]})
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
 
