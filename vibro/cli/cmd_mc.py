@@ -46,8 +46,9 @@ def register(subparsers) -> None:
                    help="number of paths; cost ∝ paths x t_end / dt: the defaults are 5.6e8 path-steps, ~30 s on 2 "
                         "cores")
     p.add_argument("--t-end", type=float, default=2200.0, help="end time of every path; cost ∝ t_end")
-    p.add_argument("--t-burn", type=float, default=200.0,
-                   help="burn-in before statistics (part of t_end, so it costs nothing extra)")
+    p.add_argument("--t-burn", type=float, default=None,
+                   help="burn-in before statistics (part of t_end, so it costs nothing extra; default 200, and 0 with "
+                        "--snapshots)")
     p.add_argument("--seed", type=int, default=1, help="root seed (numpy SeedSequence)")
     p.add_argument("--h-max", type=float, default=4.0, help="upper end of the H histogram")
     p.add_argument("--bins", type=int, default=400, help="bins of the H histogram")
@@ -95,6 +96,13 @@ def run(args) -> int:
         raise ParameterError(f"--threads-per-block {args.threads_per_block} must lie in 1-1024 (a CUDA block)")
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
+    if args.snapshots:  # the ensemble at fixed times from the start: recorded from t = 0
+        if args.t_burn not in (None, 0.0):
+            raise ParameterError(f"--snapshots records the ensemble from the start at t = 0: drop --t-burn "
+                                 f"{args.t_burn:g} (or give --t-burn 0)")
+        if args.phases:
+            raise ParameterError("--snapshots and --phases both record sections of the run; give one of them")
+    args.t_burn = (0.0 if args.snapshots else 200.0) if args.t_burn is None else args.t_burn
     resolved = automaton_from_args(args)  # None: an oscillator model without automaton options
     if resolved is not None:
         return run_automaton(args, resolved, plan)

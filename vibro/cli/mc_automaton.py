@@ -52,6 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "0:h_max:bins; a declared observable is histogrammed when given a range)")
     g.add_argument("--x0", type=float, nargs="+", default=None, metavar="V",
                    help="initial state of every path, one value per state (default: zeros)")
+    g.add_argument("--snapshots", type=int, default=0, metavar="N",
+                   help="also record the ensemble at the N times t_j = j t_end / N from the start --x0 (E[obs](t_j) "
+                        "with CIs in STEM_snapshots.csv, histograms in STEM_snapshot_histograms.csv; the run starts "
+                        "recording at t = 0; default 0: none)")
     g.add_argument("--events", type=int, default=0, metavar="K",
                    help="keep each path's first K firings from t = 0 (time, transition, speed) in STEM_events.csv; "
                         "the summary gives each transition's mean first-passage time (default 0: none)")
@@ -69,7 +73,8 @@ def automaton_from_args(args):
 
     obj, found = load_model(args.model)
     params = parse_params(args.param)
-    automaton_options = args.filter or args.observable or args.range or args.x0 is not None or args.events
+    automaton_options = (args.filter or args.observable or args.range or args.x0 is not None or args.events
+                         or args.snapshots)
     oscillator = isinstance(obj, ImpactOscillator) or (isinstance(obj, type) and issubclass(obj, ImpactOscillator))
     if oscillator and not automaton_options:  # the oscillator route, whether the file holds a class or an instance
         return None
@@ -237,6 +242,9 @@ def run(args, resolved, plan) -> int:
         extra["transitions"] = out.with_name(f"{out.stem}_transitions{out.suffix or '.csv'}")
     if args.events:
         extra["events"] = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
+    if args.snapshots:
+        for name in ("snapshots", "snapshot_histograms"):
+            extra[name] = out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
     for name, path in extra.items():  # the files named after --out, checked before the run
         plan.file(path, f"the {name} file of --out", sidecar=True)
     n = len(automaton.states)
@@ -258,7 +266,8 @@ def run(args, resolved, plan) -> int:
                                  histograms=hist, stride=args.stride, chunk_paths=chunk,
                                  max_path_steps=args.max_path_steps, scheduler=args.scheduler,
                                  checkpoint=args.checkpoint, resume=args.resume,
-                                 checkpoint_every=args.checkpoint_every, events=args.events)
+                                 checkpoint_every=args.checkpoint_every, events=args.events,
+                                 **({"phases": args.snapshots, "period": args.t_end} if args.snapshots else {}))
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
     if scheme not in ("splitting", "symplectic", "baoab"):
         try:
@@ -297,6 +306,25 @@ def run(args, resolved, plan) -> int:
         path = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
         atomic_write_text(path, ens.events_to_pandas().to_csv(index=False, float_format="%.17g"))
         files.append(path)
+    snap = None
+    if args.snapshots:
+        from hybrid.stochastic._snapshots import snapshots_of
+
+        snap = snapshots_of(ens)  # every path seen once at every time, or a one-line error
+        for name in ens.phase_counts or {}:  # the density check at every time; one line per observable
+            with warnings.catch_warnings(record=True) as unresolved:
+                warnings.simplefilter("always")
+                for j in range(len(snap.times)):
+                    edges, _ = snap.density(name, j)
+                    check_observable_histogram(extra["snapshot_histograms"], name, edges,
+                                               ens.phase_counts[name][snap._slot(j)][1:-1], snap.mean(name, j).value)
+            if unresolved:
+                print(f"vibro mc: warning: {len(unresolved)} of the {len(snap.times)} snapshot histograms of {name} "
+                      f"do not resolve the density; the first: {unresolved[0].message}", file=sys.stderr)
+        for name, frame in (("snapshots", snap.to_pandas()), ("snapshot_histograms", snap.histograms_to_pandas())):
+            path = extra[name]
+            atomic_write_text(path, frame.to_csv(index=False, float_format="%.17g"))
+            files.append(path)
 
     results = {"paths": args.paths, "samples": ens.flags["samples"], "wall_time": ens.wall_time,
                "observables": {}, "rates": {t: ens.rate(t) for t in ens.transitions},
@@ -315,6 +343,9 @@ def run(args, resolved, plan) -> int:
             hit = first[np.isfinite(first)]
             results["first_event_time"][t] = {"mean": float(hit.mean()) if hit.size else None,
                                               "paths": int(hit.size)}
+    if snap is not None:
+        results["snapshots"] = {name: [{"t": float(t), "mean": snap.mean(name, j).value, "ci": snap.mean(name, j).ci}
+                                       for j, t in enumerate(snap.times)] for name in names}
     settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "scheme_requested": args.scheme,
                 "x0": list(x0),
                 "observables": {k: str(v) for k, v in obs.items()}, "engine": "simulate_automaton",
@@ -340,6 +371,13 @@ def run(args, resolved, plan) -> int:
               f"{ens.outside_fraction(name):.3g} outside the range)")
     for t in ens.transitions:
         print(f"  rate {t:<10} {ens.rate(t):.6g} per unit time ({int(ens.events[ens.transitions.index(t)])} firings)")
+    if snap is not None:
+        name = first
+        shown = np.unique(np.linspace(0, len(snap.times) - 1, min(len(snap.times), 8)).round().astype(int))
+        print(f"  E[{name}](t) from the start x0 = {list(x0)} (95% batch-means CI), {len(shown)} of "
+              f"{len(snap.times)} times:")
+        for j in shown:
+            print(f"    t = {snap.times[j]:<10.5g} {snap.mean(name, int(j)):.6g}")
     print(f"  wrote {', '.join(str(f) for f in files)}")
     return 1 if ens.flags["outside"] else 0
 
