@@ -65,6 +65,7 @@ from ._auto_runner import AUTOMATON_SCHEMES, AutomatonEnsemble, drive_automaton,
 from ._front import AUTOMATON_SCHEME_OF  # noqa: E402
 
 __all__ += ["AUTOMATON_SCHEMES", "AUTOMATON_SCHEME_OF", "AutomatonEnsemble", "drive_automaton", "simulate_automaton"]
+from ._passage import PassageEnsemble, simulate_first_passage  # noqa: E402
 from ._snapshots import SnapshotEnsemble, simulate_snapshots  # noqa: E402
 
-__all__ += ["SnapshotEnsemble", "simulate_snapshots"]
+__all__ += ["PassageEnsemble", "SnapshotEnsemble", "simulate_first_passage", "simulate_snapshots"]
