@@ -15,7 +15,8 @@ from hybrid.stochastic import simulate_first_passage
 from hybrid.stochastic._passage import CensoredWarning, exit_guards
 from models import DuffingImpact
 
-BROADIE_GLASSERMAN = 0.5826  # zeta(1/2)/sqrt(2 pi): a barrier watched every dt acts as one moved out by this x s sqrt(dt)
+# -zeta(1/2)/sqrt(2 pi): a barrier watched every dt acts as one moved out by this x s sqrt(dt)
+BROADIE_GLASSERMAN = 0.5826
 
 
 def brownian(s: float = 1.0):
