@@ -67,5 +67,7 @@ from ._front import AUTOMATON_SCHEME_OF  # noqa: E402
 __all__ += ["AUTOMATON_SCHEMES", "AUTOMATON_SCHEME_OF", "AutomatonEnsemble", "drive_automaton", "simulate_automaton"]
 from ._passage import PassageEnsemble, simulate_first_passage  # noqa: E402
 from ._snapshots import SnapshotEnsemble, simulate_snapshots  # noqa: E402
+from ._splitting import RareEventEstimate, splitting_probability  # noqa: E402
 
-__all__ += ["PassageEnsemble", "SnapshotEnsemble", "simulate_first_passage", "simulate_snapshots"]
+__all__ += ["PassageEnsemble", "RareEventEstimate", "SnapshotEnsemble", "simulate_first_passage",
+            "simulate_snapshots", "splitting_probability"]

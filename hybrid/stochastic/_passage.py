@@ -28,10 +28,11 @@ from hybrid.errors import ModelError, ParameterError, VibroWarning
 
 from ._statistics import Estimate
 
-MARK = 1.0e9
-"""Offset of the parked position: far beyond any physical coordinate, yet the exit time keeps ~1e-7 resolution."""
+MARK = 1.0e6
+"""Offset of the parked position: far beyond the coordinates of a model, yet the exit time keeps ~1e-10 resolution."""
 
 PASSED_MODE = "passed_"
+_ROUNDING = 1e-6  # the mark's rounding (~1e-10) can put an exit in the last step a hair above t_max
 
 
 class CensoredWarning(VibroWarning):
@@ -265,7 +266,8 @@ def simulate_first_passage(automaton, domain, scheme: str = "splitting", *, dt: 
         warnings.filterwarnings("ignore", message=".*samples of 'exit_time' fall outside its histogram range")
         ens = simulate_automaton(passage, scheme, dt=dt, paths=paths, t_end=t_max, t_burn=0.0, x0=x0, seed=seed,
                                  observables={"exit_time": -mark - MARK},
-                                 histograms={"exit_time": (0.0, t_max, int(time_bins))}, phases=int(snapshots),
+                                 histograms={"exit_time": (0.0, t_max + _ROUNDING, int(time_bins))},
+                                 phases=int(snapshots),
                                  period=t_max, stride=max(1, int(t_max / dt)), **options)
     counts = ens.phase_counts["exit_time"]  # section k holds t = k T / n, section 0 the end T
     order = [(j + 1) % snapshots for j in range(snapshots)]
@@ -276,7 +278,7 @@ def simulate_first_passage(automaton, domain, scheme: str = "splitting", *, dt: 
                              f"({n}); choose t_max and dt so that t_max / (snapshots dt) is close to an integer")
     left = np.array([counts[k][1:].sum() for k in order])  # inside [0, T] or above it: left the domain
     final = counts[0]
-    if final[-1]:  # an exit time above T: impossible unless the mark was reached by a path itself
+    if final[-1]:  # an exit time above T: impossible unless a path reached the mark by its own motion
         raise ParameterError(f"{int(final[-1])} paths reached the parking mark by their own motion; the model's "
                              f"first position must stay far below {MARK:g} in size")
     return PassageEnsemble(times=np.arange(1, snapshots + 1) * (t_max / snapshots), survivors=n - left, paths=n,
