@@ -1,4 +1,5 @@
 """Quickstart: declare a vibro-impact model, look at its averaged equations, get p(H), check it.
+=============================================================================================
 
 Run:  python examples/01_quickstart.py      (headless, a few seconds; exits 1 if a self-check fails)
 """

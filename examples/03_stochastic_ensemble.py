@@ -1,4 +1,5 @@
 """Example 3: a compiled Monte Carlo ensemble of Example 1, checked against the exact elastic stationary density.
+==============================================================================================================
 
 Example 1 of the paper (x'' + c x' + a x + b x^3 = sqrt(2D) xi, |x| <= delta) with elastic walls (e = 1): the
 stationary density is then known exactly, p(x, y) ~ exp(-c H / D), so p(H) ~ T(H) exp(-c H / D). The script runs the
@@ -65,7 +66,7 @@ def exact_statistics(model):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.partition("\n")[0])
     parser.add_argument("--outdir", default=None,
                         help="folder for the figure and the CSV (default: a new folder in the system's temporary "
                              "directory, kept and printed; never the current directory)")

@@ -1,4 +1,5 @@
 """A user-defined model in a few lines: a hardening-softening spring between barriers, p(H) by averaging.
+======================================================================================================
 
 Run:  python examples/04_user_model.py      (headless, a few seconds; exits 1 if the self-check fails)
 Or from the command line:  vibro pdf --model examples/04_user_model.py:HardeningSoftening --out p.csv

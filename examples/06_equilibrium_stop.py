@@ -1,4 +1,5 @@
 """A linear oscillator against a stop at its rest position (motion on x >= 0), white noise, Newton impacts.
+========================================================================================================
 
 Every orbit hits the stop at its highest speed, once per half period: the classical case of the random-vibration
 literature. As r -> 1 the mean energy tends to D / (c + (4 omega / pi)(1 - r)/(1 + r)) for x'' + c x' + omega^2 x =

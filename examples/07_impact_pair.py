@@ -1,4 +1,5 @@
 """A two-degree-of-freedom impact pair (a vibro-impact energy sink) against its Gibbs marginal.
+============================================================================================
 
 A primary mass on a spring carries a second mass in a clearance |x2 - x1| <= gap; they collide keeping momentum.
 With damping and noise in fluctuation-dissipation balance and elastic impacts, the stationary density is

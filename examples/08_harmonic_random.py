@@ -1,4 +1,5 @@
 """Harmonic plus random forcing: time-averaged and phase-resolved (Poincaré-section) densities by Monte Carlo.
+===========================================================================================================
 
     x'' + c x' + a x + b x^3 = A cos(Omega t) + sqrt(2 D) xi(t),   |x| < delta,   Newton impacts v+ = -r v-
 

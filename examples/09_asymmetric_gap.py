@@ -1,4 +1,5 @@
 """A Duffing oscillator in an asymmetric gap: walls at x = -0.6 and x = 1.0, white noise, Newton impacts.
+======================================================================================================
 
 The two walls sit at different energies G(-0.6) < G(1.0). Below the lower one no orbit impacts; between the two
 levels an orbit hits the left wall only, once per quasi-period; above both it hits both. The energy-envelope

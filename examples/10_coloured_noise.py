@@ -1,4 +1,5 @@
 """Coloured noise: an oscillator driven by filtered noise, against the closed-form spectrum and the white limit.
+=============================================================================================================
 
 ``models.excitation`` attaches a filter to any model: an Ornstein-Uhlenbeck filter (bandwidth alpha) or a band-pass
 filter (damping ratio zeta, centre omega_f), normalised so that the output tends to the model's white noise of the
