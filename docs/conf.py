@@ -37,12 +37,13 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
+smartquotes = False  # keep -- in command lines as typed
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "gallery/*.png", "charts/*.csv", "**.ipynb_checkpoints",
                     "auto_examples/*.ipynb", "auto_examples/*.py", "auto_examples/*.zip", "auto_examples/*.json",
                     "auto_examples/*.md5", "auto_examples/*.codeobj.json"]
 # a markdown page's "## Section" gets an anchor, so pages can link to sections of one another
 myst_heading_anchors = 3
-myst_enable_extensions = ["dollarmath", "colon_fence"]
+myst_enable_extensions = ["colon_fence"]
 
 # API reference: one page per public object, from the numpydoc docstrings
 autosummary_generate = True
@@ -59,7 +60,7 @@ html_title = f"vibro-impact {release}"
 html_theme_options = {
     "navigation_with_keys": False,
     "show_toc_level": 2,
-    "header_links_before_dropdown": 8,
+    "header_links_before_dropdown": 5,
     "secondary_sidebar_items": ["page-toc"],
 }
 html_static_path: list[str] = []
@@ -68,109 +69,22 @@ html_show_sourcelink = False
 # ---- the gallery: examples/*.py, run as scripts ----------------------------------------------------------------
 #
 # The examples are plain scripts: a docstring, a main() and ``sys.exit(main(...))``; they draw with matplotlib and
-# save their figures (02, 03, 05) or leave them open. The scraper below shows every figure a script saved or left
-# open, drawn by the script itself; ``sys.exit(0)`` ends the script normally and ``sys.exit(1)`` (a failed
+# save their figures (02, 03, 05) or leave them open. docs/gallery_support.py shows every figure a script saved or
+# left open, drawn by the script itself; ``sys.exit(0)`` ends the script normally and ``sys.exit(1)`` (a failed
 # self-check) fails the build.
 
 RUN_GALLERY = os.environ.get("VIBRO_DOCS_GALLERY", "1") != "0"
-
-
-def _takes_quick(script: str) -> bool:
-    return "--quick" in (ROOT / "examples" / script).read_text()
-
-
-def reset_argv(gallery_conf, script_vars):
-    """Each example's command line: ``--quick`` for the scripts that offer a small size."""
-    return ["--quick"] if _takes_quick(Path(script_vars["src_file"]).name) else []
-
-
-class ExampleExit(Exception):
-    """A gallery example ended with a non-zero status: one of its self-checks failed."""
-
-
-class ScriptRunner:
-    """Run one example as ``python examples/NAME.py`` would: ``sys.exit`` ends it, figures it saves are kept.
-
-    ``sys.exit(0)`` at the end of a script stops the script and nothing else; a non-zero status raises
-    :class:`ExampleExit`, which sphinx-gallery reports as a failed example (and the build fails). Every figure the
-    script saves with ``savefig`` is remembered, so that one it closes after saving still reaches the gallery.
-    Installed before each example and removed after it (``reset_modules``), so the build itself keeps the real
-    ``sys.exit``.
-    """
-
-    def __init__(self):
-        self.saved: list = []
-        self._exit = None
-        self._savefig = None
-
-    def __repr__(self):  # sphinx-gallery hashes its configuration; keep it stable between builds
-        return "ScriptRunner()"
-
-    def __call__(self, gallery_conf, fname, when="before"):
-        import matplotlib
-
-        matplotlib.use("Agg")
-        from matplotlib.figure import Figure
-
-        if when == "before":
-            self.saved = []
-            self._exit, self._savefig = sys.exit, Figure.savefig
-            sys.exit = self._fake_exit
-            runner = self
-
-            def savefig(fig, *args, **kwargs):
-                if not any(fig is f for f in runner.saved):
-                    runner.saved.append(fig)
-                return runner._savefig(fig, *args, **kwargs)
-
-            Figure.savefig = savefig
-        else:
-            if self._exit is not None:
-                sys.exit, Figure.savefig = self._exit, self._savefig
-                self._exit = self._savefig = None
-
-    @staticmethod
-    def _fake_exit(status=0):
-        if status not in (0, None):
-            raise ExampleExit(f"the example exited with status {status!r}: a self-check failed")
-
-
-SCRIPT_RUNNER = ScriptRunner()
-
-
-class SavedFigureScraper:
-    """sphinx-gallery image scraper: the figures an example saved, then those it left open (each once)."""
-
-    def __repr__(self):
-        return "SavedFigureScraper()"
-
-    def __call__(self, block, block_vars, gallery_conf):
-        import matplotlib.pyplot as plt
-        from sphinx_gallery.scrapers import figure_rst
-
-        figures = list(SCRIPT_RUNNER.saved)
-        for num in plt.get_fignums():
-            fig = plt.figure(num)
-            if not any(fig is f for f in figures):
-                figures.append(fig)
-        SCRIPT_RUNNER.saved = []
-        paths = []
-        for fig, path in zip(figures, block_vars["image_path_iterator"]):
-            fig.savefig(path, dpi=96)
-            paths.append(path)
-        plt.close("all")
-        return figure_rst(paths, gallery_conf["src_dir"])
-
 
 sphinx_gallery_conf = {
     "examples_dirs": str(ROOT / "examples"),
     "gallery_dirs": "auto_examples",
     "filename_pattern": r"/\d\d_",
     "plot_gallery": RUN_GALLERY,
-    "reset_argv": reset_argv,
-    "reset_modules": (SCRIPT_RUNNER,),
+    # named by string (docs/gallery_support.py), so that the configuration pickles and Sphinx can cache it
+    "reset_argv": "gallery_support.reset_argv",
+    "reset_modules": ("gallery_support.run_as_script",),
     "reset_modules_order": "both",
-    "image_scrapers": (SavedFigureScraper(),),
+    "image_scrapers": ("gallery_support.scrape_figures",),
     "within_subsection_order": "FileNameSortKey",
     "download_all_examples": False,
     "remove_config_comments": True,
@@ -254,7 +168,7 @@ def write_api_pages() -> None:
                       "``import vibro`` are listed in :doc:`facade`.", ""]
         for modname in modules:
             module = importlib.import_module(modname)
-            title = f"``{modname}``"
+            title = f"``{modname}``" + (" (the package itself)" if modname == package else "")
             lines += [title, "-" * len(title), "", f".. module:: {modname}", "", _first_line(modname), "",
                       f".. currentmodule:: {modname}", ""]
             own, elsewhere = [], []

@@ -1,7 +1,7 @@
 """A two-degree-of-freedom impact pair (a vibro-impact energy sink) against its Gibbs marginal.
 ============================================================================================
 
-A primary mass on a spring carries a second mass in a clearance |x2 - x1| <= gap; they collide keeping momentum.
+A primary mass on a spring carries a second mass in a clearance ``|x2 - x1| <= gap``; they collide keeping momentum.
 With damping and noise in fluctuation-dissipation balance and elastic impacts, the stationary density is
 exp(-H / theta) on the admissible set, so the relative coordinate z = x2 - x1 is a Gaussian of variance
 theta (1/k1 + 1/k2) cut to the clearance. With r < 1 the impacts dissipate and z spreads less: printed beside it.

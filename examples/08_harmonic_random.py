@@ -1,7 +1,7 @@
 """Harmonic plus random forcing: time-averaged and phase-resolved (Poincaré-section) densities by Monte Carlo.
 ===========================================================================================================
 
-    x'' + c x' + a x + b x^3 = A cos(Omega t) + sqrt(2 D) xi(t),   |x| < delta,   Newton impacts v+ = -r v-
+    x'' + c x' + a x + b x^3 = A cos(Omega t) + sqrt(2 D) xi(t),   ``|x| < delta``,   Newton impacts v+ = -r v-
 
 A periodically forced system has periodic statistics: besides the time average, ``simulate_automaton(...,
 phases=N, period=T)`` histograms the state at the N phases k T / N of the forcing (dt is lowered so that the

@@ -6,7 +6,7 @@ filter (damping ratio zeta, centre omega_f), normalised so that the output tends
 same intensity D as the bandwidth grows. The filter's states join the model's and its parameters become automaton
 parameters.
 
-1. A linear oscillator x'' + c x' + x = z without barriers: Var x = int |H(iw)|^2 S_z(w) dw, with the filter's
+1. A linear oscillator x'' + c x' + x = z without barriers: Var x = ``int |H(iw)|^2 S_z(w) dw``, with the filter's
    closed-form spectral density S_z. Monte Carlo for three OU bandwidths and a band-pass filter; the only allowance
    beyond the 95 % interval is the splitting scheme's own bias, known exactly for a linear system.
 2. The same oscillator between elastic barriers: as alpha grows, E[H] tends to the white-noise Gibbs value
