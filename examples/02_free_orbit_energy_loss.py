@@ -1,4 +1,5 @@
 """Example 2: a free impact orbit (h = 0, no noise) and its energy loss per impact, checked against eq. 11.
+========================================================================================================
 
 Example 1 of the paper without damping and noise: x'' + a x + b x^3 = 0 between barriers at +-delta, Ma's
 restitution law with V_C = 0.4. Both deterministic backends locate every impact exactly; the script checks that
@@ -29,7 +30,7 @@ TOLERANCE = {"heyoka": 1e-10, "scipy": 1e-7}  # relative, eq. 11 (issue 2)
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.partition("\n")[0])
     parser.add_argument("--outdir", default=None,
                         help="folder for the figure and the CSV (default: a new folder in the system's temporary "
                              "directory, kept and printed; never the current directory)")

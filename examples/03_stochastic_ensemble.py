@@ -1,6 +1,7 @@
 """Example 3: a compiled Monte Carlo ensemble of Example 1, checked against the exact elastic stationary density.
+==============================================================================================================
 
-Example 1 of the paper (x'' + c x' + a x + b x^3 = sqrt(2D) xi, |x| <= delta) with elastic walls (e = 1): the
+Example 1 of the paper (x'' + c x' + a x + b x^3 = sqrt(2D) xi, ``|x| <= delta``) with elastic walls (e = 1): the
 stationary density is then known exactly, p(x, y) ~ exp(-c H / D), so p(H) ~ T(H) exp(-c H / D). The script runs the
 weak-order-2 splitting scheme (free flight and collisions exact inside the step) at dt = 0.035, checks E[x^2],
 P(H < G(delta)), the impact rate per wall (Rice: p_x(delta) sqrt(D / (2 pi c))) and the L1 distance of p(H) against
@@ -65,7 +66,7 @@ def exact_statistics(model):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.partition("\n")[0])
     parser.add_argument("--outdir", default=None,
                         help="folder for the figure and the CSV (default: a new folder in the system's temporary "
                              "directory, kept and printed; never the current directory)")

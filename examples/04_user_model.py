@@ -1,4 +1,5 @@
 """A user-defined model in a few lines: a hardening-softening spring between barriers, p(H) by averaging.
+======================================================================================================
 
 Run:  python examples/04_user_model.py      (headless, a few seconds; exits 1 if the self-check fails)
 Or from the command line:  vibro pdf --model examples/04_user_model.py:HardeningSoftening --out p.csv
@@ -6,6 +7,7 @@ Or from the command line:  vibro pdf --model examples/04_user_model.py:Hardening
 
 import sys
 
+import matplotlib.pyplot as plt
 import numpy as np
 from scipy import integrate
 
@@ -27,9 +29,15 @@ class HardeningSoftening(ImpactOscillator):
 def main() -> int:
     model = HardeningSoftening()
     print(averaging_equations(model))
-    for method in ("paper", "jump"):
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for method, style in (("paper", "-"), ("jump", "--")):
         sd = stationary_density(model, method, h_max=5.0, points=1000)
         print(f"{method:6s} E[H] = {sd.mean_energy:.4f}  P(no impact) = {sd.prob_below_barrier:.4f}")
+        ax.plot(sd.H, sd.p, style, label=f"{method}: E[H] = {sd.mean_energy:.3f}")
+    ax.axvline(model.barrier_energy, color="0.6", ls=":", label="G(delta)")
+    ax.set(xlabel="H", ylabel="p(H)", title="x'' + c x' + x + k3 x^3 - k5 x^5 = xi, |x| < 1.5, Ma V_C = 0.3")
+    ax.legend()
+    fig.tight_layout()
 
     # Self-check (elastic barriers are exact): p(x) ~ exp(-c G(x) / D) on |x| < delta, computed here by plain quad.
     el = model.with_restitution(Elastic())
@@ -47,6 +55,7 @@ def main() -> int:
         print("FAILED")
         return 1
     print("OK")
+    plt.show()  # nothing to show when headless (Agg); the documentation's gallery shows the figure
     return 0
 
 

@@ -1,4 +1,5 @@
 """Example 5: reproduce the paper's Fig. 2 (p(H) of Example 1 for three barrier positions) and check it.
+=====================================================================================================
 
 Runs ``vibro figure 2`` (the same code path, through :func:`vibro.studies.figures.run_figure`) into a directory, then
 reads back the sidecar JSON and the CSV and checks, on the numbers:
