@@ -123,8 +123,6 @@ def simulate_snapshots(automaton, scheme: str = "splitting", *, dt: float, paths
     ...                           histograms={"H": (0.0, 4.0, 40)}, chunk_paths=8)  # doctest: +SKIP
     >>> snap.means("H")  # doctest: +SKIP
     """
-    from models import ImpactOscillator
-
     from ._auto_runner import simulate_automaton
 
     for name in ("t_burn", "phases", "period"):
@@ -132,7 +130,7 @@ def simulate_snapshots(automaton, scheme: str = "splitting", *, dt: float, paths
             raise ParameterError(f"simulate_snapshots sets {name} itself (the ensemble is recorded from t = 0)")
     if isinstance(snapshots, bool) or not isinstance(snapshots, (int, np.integer)) or snapshots < 1:
         raise ParameterError(f"snapshots={snapshots!r} must be a positive integer")
-    if isinstance(automaton, ImpactOscillator):
+    if hasattr(automaton, "to_automaton"):  # an oscillator model (models sits above hybrid: no import)
         automaton = automaton.to_automaton()
     ens = simulate_automaton(automaton, scheme, dt=dt, paths=paths, t_end=t_end, t_burn=0.0, x0=x0, seed=seed,
                              phases=int(snapshots), period=t_end, **options)

@@ -262,9 +262,7 @@ def splitting_probability(automaton, phi, target: float, *, levels, t_max: float
     >>> est.probability, est.ci                                                      # doctest: +SKIP
     """
     from hybrid.automaton import _as_expr
-    from models import ImpactOscillator
-
-    if isinstance(automaton, ImpactOscillator):
+    if hasattr(automaton, "to_automaton"):  # an oscillator model (models sits above hybrid: no import)
         automaton = automaton.to_automaton()
     expr = _as_expr(phi, "the importance function") if isinstance(phi, str) else sp.sympify(phi)
     expr = expr.xreplace({s: automaton.observables[s.name] for s in expr.free_symbols
