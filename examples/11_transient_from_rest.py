@@ -1,4 +1,5 @@
 """The energy from rest: Monte Carlo at fixed times against the averaged transient density.
+==========================================================================================
 
     x'' + c x' + x + b x^3 = sqrt(2 D) xi(t),   |x| < 1,   Ma's restitution (Example 1 of the paper)
 

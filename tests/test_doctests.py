@@ -4,13 +4,15 @@
 import doctest
 import importlib
 import pkgutil
+import re
 from pathlib import Path
 
 import pytest
 
 PACKAGES = ["hybrid", "models", "averaging", "vibro"]
 ROOT = Path(__file__).resolve().parent.parent
-DOC_PAGES = sorted(p for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.parts and ">>>" in p.read_text())
+DOC_PAGES = sorted(p for p in (ROOT / "docs").rglob("*.md")  # pages with a prompt at the start of a line
+                   if "_build" not in p.parts and re.search(r"^\s*>>> ", p.read_text(), re.MULTILINE))
 
 
 def _modules():
