@@ -1,7 +1,7 @@
 """The energy from rest: Monte Carlo at fixed times against the averaged transient density.
 ==========================================================================================
 
-    x'' + c x' + x + b x^3 = sqrt(2 D) xi(t),   |x| < 1,   Ma's restitution (Example 1 of the paper)
+    x'' + c x' + x + b x^3 = sqrt(2 D) xi(t),   ``|x| < 1``,   Ma's restitution (Example 1 of the paper)
 
 ``simulate_snapshots`` records the ensemble at the times t_j = j T / N from one start (here rest, x = y = 0):
 E[H](t_j) with a 95 % confidence interval, and the histogram of H at each t_j. ``averaging.transient_density``
