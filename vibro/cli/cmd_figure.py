@@ -15,7 +15,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "figure", help="reproduce a paper figure (2-16) or all of them: PNG + CSV + JSON sidecar",
         description=f"Reproduce Figures 2-16 of the paper {PAPER}. Each figure shows the analytic p(H) or p(x, y) "
-                    "by the paper's averaging and by the jump method, beside Monte Carlo. How we read the paper's "
+                    "by the paper's averaging, the jump method and the phase-plane Fokker-Planck solver (fpk), beside "
+                    "Monte Carlo. How we read the paper's "
                     f"typos and ambiguities: {READINGS}. Finished figures (sidecar JSON with the same spec hash) "
                     "are reused; use --force to recompute.",
     )
