@@ -314,17 +314,17 @@ def out_crossing_rate(sd, domain: Domain) -> float | None:
         return None
     lo, hi = sd._x_range()
     xs = np.linspace(lo, hi, 4001)
-    v = domain.value(xs, np.zeros_like(xs))
+    inside = domain.value(xs, np.zeros_like(xs)) < 0
     rate = 0.0
-    for k in np.flatnonzero(np.sign(v[:-1]) * np.sign(v[1:]) < 0):
+    for k in np.flatnonzero(inside[:-1] != inside[1:]):
         a, b = xs[k], xs[k + 1]
         for _ in range(60):  # bisection to the boundary point
             mid = 0.5 * (a + b)
-            if np.sign(domain.value(mid, 0.0)) == np.sign(v[k]):
+            if (domain.value(mid, 0.0) < 0) == inside[k]:
                 a = mid
             else:
                 b = mid
-        rate += crossing_rate(sd, 0.5 * (a + b), 1 if v[k + 1] > v[k] else -1)
+        rate += crossing_rate(sd, 0.5 * (a + b), 1 if inside[k] else -1)  # leaving upwards or downwards
     return rate
 
 
@@ -395,6 +395,7 @@ def _stencil(model, sd, x0, y0):
 
 def _fpk_once(model, domain, start, grid, h_max, walls, restitution, times, want_survival, want_rate):
     t0 = time.perf_counter()
+    cpu0 = time.process_time()
     n_e, n_p = grid
     h_grid = aligned_h_max(domain.energy_level, n_e) if domain.energy_level is not None else h_max
     sd = solve_phase_plane(model, grid, h_grid, walls, restitution, points=3)
@@ -419,6 +420,7 @@ def _fpk_once(model, domain, start, grid, h_max, walls, restitution, times, want
     if want_rate:
         out["decay_rate"] = back.decay_rate()
     out["seconds"] = time.perf_counter() - t0
+    out["cpu_seconds"] = time.process_time() - cpu0
     out["assemble_seconds"] = t1 - t0
     out["_sd"], out["_safe"] = sd, safe
     return out
