@@ -124,17 +124,18 @@ def test_backward_problem_of_a_single_state():
 # ------------------------------------------------------------------ spectra
 def test_free_linear_oscillator_spectrum_matches_its_transfer_function():
     c, D = 0.2, 0.05
-    s = spectrum_fpk(linear(c, D), "x", omega_max=4.0, points=60, refine=40, grid=(40, 48), h_max=3.0)
+    s = spectrum_fpk(linear(c, D), "x", omega_max=4.0, points=40, refine=30, grid=(40, 48), h_max=3.0,
+                     extrapolate=True)
     exact = free_psd(c, D, s.omega)
+    # first order in the grid: L1 0.029 on 40 x 48, 0.015 on 80 x 96; extrapolated from 20 x 24 and 40 x 48, 0.005
     l1 = np.trapezoid(np.abs(s.S - exact), s.omega) / np.trapezoid(exact, s.omega)
-    assert l1 < FREE_PSD_L1, l1
+    assert l1 < 0.01, l1
+    assert 0.5 * 0.029 < s.details["error_estimate"] < 2 * 0.029  # the estimate of the unextrapolated error
     assert abs(s.peak_omega / np.sqrt(1 - c * c / 2) - 1) < 2e-3
     assert abs(s.variance / (D / c) - 1) < 5e-3
-    # the integral over [0, 4] holds the variance up to the tail above 4 (about 6e-4 of it) and the quadrature
-    assert abs(s.variance_check - 1) < 5e-3
-
-
-FREE_PSD_L1 = 0.035
+    # the integral over [0, 4] holds the variance up to the tail above 4 (about 6e-4 of it) and the trapezoid rule
+    # on these 75 frequencies (measured 1.0066)
+    assert abs(s.variance_check - 1) < 1e-2
 
 
 def test_folded_oscillator_spectrum_matches_the_folded_gaussian_covariance():
@@ -151,7 +152,9 @@ def test_folded_oscillator_spectrum_matches_the_folded_gaussian_covariance():
     assert l1 < FOLDED_PSD_L1, l1
 
 
-FOLDED_PSD_L1 = 0.05
+FOLDED_PSD_L1 = 0.04
+"""Measured 0.030 on 40 x 48 (the stop at the equilibrium meets it at a corner of the grid; the two-grid
+extrapolation does not help there: 0.048)."""
 
 
 # ------------------------------------------------------------------ interfaces and refusals

@@ -12,10 +12,11 @@ absorbing (their value 0):
   found by ARPACK on (A_SS^T)^{-1} M.
 
 Cells are classified by their centre. For an energy domain H < H_c the rings are laid out so that the outermost
-ring is centred on H_c: the absorbing condition then sits exactly on the level and the scheme keeps its second
-order. Any other domain (|x| < x_c, an observable) cuts rings and angles: a cell is safe when its centre is, so the
-boundary is placed to within half a cell (first order). The error estimate compares the answer with the one on a
-grid twice coarser in both directions (Richardson with the order given).
+ring is centred on H_c: the absorbing condition then sits exactly on the level. Any other domain (|x| < x_c, an
+observable) cuts rings and angles: a cell is safe when its centre is, so the boundary is placed to within half a
+cell, a first-order error. From rest (H = 0, where the angle coordinate degenerates) the mean time converges at
+first order in either case (measured on Example 1). The error estimate compares the answer with the one on a grid
+twice coarser in both directions (Richardson, order 1 by default).
 """
 
 from __future__ import annotations
@@ -454,7 +455,8 @@ def first_passage_fpk(model, domain, start=(0.0, 0.0), *, grid=PASSAGE_GRID, h_m
     survival : bool
         Compute R(t), f(t) and the decay rate (the mean time alone is one sparse solve).
     order : float, optional
-        Convergence order for the estimate (default 2 for H < H_c, 1 for other domains; see the module notes).
+        Convergence order for the estimate (default 1: measured from rest on Example 1, where the mean time moves
+        by 0.0040 and 0.0018 between the grids 60 x 64, 120 x 128 and 240 x 256 at H_c = 0.5).
 
     Returns
     -------
@@ -488,6 +490,9 @@ def first_passage_fpk(model, domain, start=(0.0, 0.0), *, grid=PASSAGE_GRID, h_m
             raise ParameterError(f"start={start!r} must be a state (x, y) or 'stationary'") from exc
         if len(start) != 2 or not all(np.isfinite(start)):
             raise ParameterError(f"start={start!r} must be a finite state (x, y)")
+        if not domain.contains(*start):
+            raise ParameterError(f"the start (x, y) = ({start[0]:g}, {start[1]:g}) lies outside the domain "
+                                 f"{domain.text!r}")
     first = _fpk_once(model, domain, start, (n_e, n_p), h_max, walls, restitution, None, False, False)
     mean = first["mean_time"]
     if not (np.isfinite(mean) and mean > 0):
@@ -517,7 +522,7 @@ def first_passage_fpk(model, domain, start=(0.0, 0.0), *, grid=PASSAGE_GRID, h_m
         details["stationary_impact_rate"] = first["_sd"].impact_rate
     est = None
     if check:
-        p = order if order is not None else (2.0 if domain.energy_level is not None else 1.0)
+        p = 1.0 if order is None else float(order)
         coarse = _fpk_once(model, domain, start, (max(8, n_e // 2), max(16, n_p // 2)), h_max, walls, restitution,
                            None, False, False)
         est = abs(mean - coarse["mean_time"]) / (2.0**p - 1.0)

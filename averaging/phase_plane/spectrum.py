@@ -209,7 +209,7 @@ class _Resolvent:
 
 def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, points: int = 150,
                  refine: int = 100, grid=SPECTRUM_GRID, h_max: float = 4.0, walls="model",
-                 restitution=None) -> Spectrum:
+                 restitution=None, check: bool = False, extrapolate: bool = False) -> Spectrum:
     """One-sided PSD of ``observable`` from the phase-plane generator (one complex sparse solve per frequency).
 
     Parameters
@@ -226,6 +226,12 @@ def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, p
         for the peak, the bandwidth and the variance check).
     grid, h_max, walls, restitution
         As in :func:`averaging.phase_plane.stationary_density_xy`.
+    check : bool
+        Also compute S on a grid twice coarser at the same frequencies: ``error_estimate`` is then the L1
+        distance of the two over the integral of S, over 2**p - 1 with p = 1 (the order measured on the free
+        linear oscillator: L1 error 0.029 on 40 x 48, 0.015 on 80 x 96). Costs a quarter more.
+    extrapolate : bool
+        Return the Richardson extrapolation S + (S - S_coarse) (implies ``check``).
 
     Returns
     -------
@@ -269,8 +275,33 @@ def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, p
         extra = np.setdiff1d(extra, freqs)
         S = np.concatenate([S, [2.0 / np.pi * res.laplace(w).real for w in extra]])
         freqs = np.concatenate([freqs, extra])
+        # then the vertex of the parabola through the highest three samples, twice, and its neighbours at a tenth
+        # of the spacing: the peak frequency to a small fraction of the peak's width
+        for _ in range(2):
+            order = np.argsort(freqs)
+            k = int(np.argmax(S[order]))
+            vertex = _peak_location(freqs[order], S[order], k)
+            step = 0.1 * np.min(np.abs(np.diff(freqs[order][max(k - 1, 0):k + 2]))) if len(freqs) > 2 else 0.0
+            new = np.setdiff1d([w for w in (vertex - step, vertex, vertex + step) if w >= 0], freqs)
+            S = np.concatenate([S, [2.0 / np.pi * res.laplace(w).real for w in new]])
+            freqs = np.concatenate([freqs, new])
     details = {"grid": [int(grid[0]), int(grid[1])], "cells": int(sd.grid.n), "frequencies": int(len(freqs)),
-               "seconds": time.perf_counter() - t0, "h_support": float(sd.h_support)}
+               "h_support": float(sd.h_support), "error_estimate": None, "extrapolated": bool(extrapolate)}
+    if check or extrapolate:
+        coarse_grid = (max(8, int(grid[0]) // 2), max(16, int(grid[1]) // 2))
+        sdc = stationary_density_xy(model, grid=coarse_grid, h_max=h_max, walls=walls, restitution=restitution,
+                                    check=False)
+        fc = observable_values(model, observable, sdc.cell_x, sdc.cell_y)
+        gc = fc - float(sdc.cell_mass @ fc)
+        resc = _Resolvent(sdc, gc)
+        Sc = np.array([2.0 / np.pi * resc.laplace(w).real for w in freqs])
+        order = np.argsort(freqs)
+        diff = np.trapezoid(np.abs(S - Sc)[order], freqs[order])
+        details["error_estimate"] = float(diff / max(np.trapezoid(S[order], freqs[order]), 1e-300))
+        if extrapolate:
+            S = 2.0 * S - Sc
+            var = 2.0 * var - float(sdc.cell_mass @ (gc * gc))
+    details["seconds"] = time.perf_counter() - t0
     out = Spectrum("fpk", str(observable), freqs, S, var, mean, details)
     out.phase_density = sd
     return out
