@@ -79,7 +79,7 @@ def first_passage(model, domain, x0=(0.0, 0.0), method: str = "fpk", **options) 
     Examples
     --------
     >>> from models import DuffingImpact, Ma
-    >>> r = first_passage(DuffingImpact(restitution=Ma(0.4)), "H < 0.5", grid=(60, 64), check=False)
+    >>> r = first_passage(DuffingImpact(restitution=Ma(0.4)), "H < 0.5", grid=(60, 64), check=False, steps=50)
     >>> round(r.mean_time, 1), list(r.to_pandas().columns)
     (10.7, ['t', 'R', 'density'])
     """
@@ -251,7 +251,7 @@ def spectrum(model, observable: str = "x", method: str = "fpk", **options) -> Sp
     --------
     >>> from models import ImpactOscillator
     >>> lin = ImpactOscillator("x", "c*y", parameters={"c": 0.2, "D": 0.05}, barriers=None)
-    >>> s = spectrum(lin, "x", omega_max=3.0, points=60, refine=30, grid=(40, 48), h_max=3.0)
+    >>> s = spectrum(lin, "x", omega_max=3.0, points=25, refine=10, grid=(20, 32), h_max=3.0)
     >>> round(s.peak_omega, 2)
     0.99
     """

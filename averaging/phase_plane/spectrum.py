@@ -241,9 +241,9 @@ def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, p
     --------
     >>> from models import ImpactOscillator
     >>> lin = ImpactOscillator("x", "c*y", parameters={"c": 0.2, "D": 0.05}, barriers=None)
-    >>> s = spectrum_fpk(lin, "x", omega_max=4.0, points=80, refine=40, grid=(40, 48), h_max=3.0)
-    >>> abs(s.peak_omega - 1.0) < 0.02, abs(s.variance_check - 1) < 0.02
-    (True, True)
+    >>> s = spectrum_fpk(lin, "x", omega_max=4.0, points=25, refine=10, grid=(20, 32), h_max=3.0)
+    >>> round(s.peak_omega, 2), round(s.variance, 2)        # exact: 0.99 and the variance D / c = 0.25
+    (0.99, 0.25)
     """
     model.require_autonomous()
     if omega is None:
