@@ -211,7 +211,7 @@ def first_passage_mc(model, domain: Domain, start, *, paths: int = 2000, dt: flo
     Tc = np.where(censored, np.inf, T)
     R = np.array([np.mean(Tc > s) for s in t])
     lo, hi = _wilson(R, paths)
-    dens = np.concatenate([[0.0], -np.diff(R) / np.diff(t)])
+    dens = np.concatenate([[0.0], (R[:-1] - R[1:]) / np.diff(t)])
     details = {"paths": int(paths), "dt": float(dt), "scheme": scheme, "seed": int(seed),
                "censored": int(censored.sum()), "seconds": time.perf_counter() - t0, "ci": [mean - half, mean + half]}
     res = FirstPassage("mc", domain.text, start, mean, t, R, dens, float("nan"), half, details)
