@@ -105,15 +105,19 @@ def test_a_level_domain_gives_the_poisson_estimate_from_rices_rate():
     assert np.allclose(r.poisson, np.exp(-nu * r.t))
 
 
-def test_example_1_mean_first_passage_converges_with_the_grid_and_is_fast():
-    # Example 1 at H_c = 2: averaging is 15-18 % short of Monte Carlo there (issue 26); fpk on two grids
+REFERENCE_MFPT_2 = 121.2
+"""Example 1's mean first passage from rest to H = 2, event-exact Monte Carlo of issue 26 (40,000 paths, two time
+steps, CI about 0.8 %): its table puts paper (102.80) 15 % and jump (99.61) 18 % short, i.e. 120.9-121.5."""
+
+
+def test_example_1_mean_first_passage_at_hard_impacts_is_within_one_percent_and_fast():
+    # averaging is 15-18 % short at H_c = 2, where every orbit impacts hard; fpk measured 120.85 (120x128)
     m = DuffingImpact(restitution=Ma(vc=0.4))
-    r = first_passage_fpk(m, "H < 2.0", grid=(60, 64), check=True, survival=False)
-    fine = first_passage_fpk(m, "H < 2.0", grid=(120, 128), check=False, survival=False)
-    # the two-grid estimate bounds the distance to the finer grid's answer (measured 120.93 and 120.85)
-    assert abs(r.mean_time - fine.mean_time) < r.error_estimate < 0.01 * r.mean_time
-    # CPU seconds (the goal is 2 s each; measured 0.1 and 0.45 s on one core)
-    assert r.details["cpu_seconds"] < 2.0 and fine.details["cpu_seconds"] < 2.0
+    r = first_passage_fpk(m, "H < 2.0", grid=(120, 128), check=True, survival=False)
+    assert abs(r.mean_time / REFERENCE_MFPT_2 - 1) < 0.01, r.mean_time
+    assert r.error_estimate < 0.01 * r.mean_time  # from the grid 60 x 64: 0.08
+    # CPU seconds of the solve (the goal is 2 s; measured 0.45 s on one core)
+    assert r.details["cpu_seconds"] < 2.0
 
 
 def test_backward_problem_of_a_single_state():
