@@ -250,6 +250,26 @@ def mean_first_passage_time(model, H_c: float, H0=0.0, method="paper", points: i
     return float(out) if out.ndim == 0 else out
 
 
+def passage_generator(model, H_c: float, method="paper", points: int = 2000, nodes: int = DEFAULT_NODES):
+    """The energy grid on [0, H_c] and the averaged chain's backward generator Q (the last node absorbing, as in
+    :func:`mean_first_passage_time`), for survival functions and decay rates of the averaged energy.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> lin = ImpactOscillator("x", "c*y", parameters={"c": 0.1, "D": 0.1}, barriers=None)
+    >>> grid, Q = passage_generator(lin, 1.0, points=50)
+    >>> len(grid), Q.shape
+    (50, (50, 50))
+    """
+    m = get_method(method)
+    _refuse_flights(m)
+    _check_grid_size("passage_generator", points, 0, False)
+    grid = _energy_grid(H_c, points, "H_c")
+    chain = EnergyChain(energy_table(model, H_c, nodes), grid, m, model.restitution)
+    return grid, chain.generator().tocsc()
+
+
 def _refuse_flights(m) -> None:
     if m.flights:
         raise ParameterError(f"method {m.name!r} has no transient form here (its flight clock is a stationary "

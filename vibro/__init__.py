@@ -30,6 +30,8 @@ _EXPORTS = {
     # densities
     "stationary_density": "averaging", "transient_density": "averaging",
     "mean_first_passage_time": "averaging",
+    # first passage and spectra
+    "first_passage": "vibro.passage", "spectrum": "vibro.passage",
     # method choice
     "solve": "vibro.solve", "choose": "vibro.solve", "diagnose": "vibro.solve",
     # errors and warnings

@@ -42,6 +42,12 @@ on the exact elastic density, 1.75 on Fig. 2 (Ma, delta = 1); 1.3 for E[H] with 
 (the wall meets the equilibrium at a corner of the domain). The outer ring at ``h_max`` is reflecting: choose
 h_max in the tail (a warning says when it is not).
 
+First passage and spectra
+-------------------------
+The assembled operator is kept on the result (``PhaseDensity.discretisation``): its adjoint is the backward
+generator, so first passage, survival and decay rates (:mod:`.passage`) and power spectra through the resolvent
+(:mod:`.spectrum`) reuse this discretisation, impact boundary included.
+
 Examples
 --------
 >>> from models import DuffingImpact, Ma
@@ -53,9 +59,13 @@ Examples
 
 from __future__ import annotations
 
+from .passage import Domain, FirstPassage, PassageWarning, crossing_rate, first_passage_fpk
 from .solver import DEFAULT_GRID, GridWarning, PhaseDensity, solve_phase_plane, stationary_density_xy
+from .spectrum import Spectrum, spectrum_fpk
 
 METHOD = "fpk"
 """Name of this method family (beside the averaging methods ``paper``, ``exact-two-impact``, ``jump``)."""
 
-__all__ = ["DEFAULT_GRID", "METHOD", "GridWarning", "PhaseDensity", "solve_phase_plane", "stationary_density_xy"]
+__all__ = ["DEFAULT_GRID", "METHOD", "Domain", "FirstPassage", "GridWarning", "PassageWarning", "PhaseDensity",
+           "Spectrum", "crossing_rate", "first_passage_fpk", "solve_phase_plane", "spectrum_fpk",
+           "stationary_density_xy"]

@@ -159,29 +159,8 @@ class PhaseDensity:
         >>> sd.joint(np.linspace(-1, 1, 5), np.linspace(-2, 2, 3)).shape
         (3, 5)
         """
-        x = np.asarray(x, dtype=float)
-        y = np.asarray(y, dtype=float)
-        XX, YY = np.meshgrid(x, y)
-        G = self.model.potential(XX)
-        u = np.sign(XX) * np.sqrt(2.0 * np.maximum(G, 0.0))
-        H = 0.5 * YY**2 + G
-        psi = np.arctan2(YY, u)
-        psi = np.where(psi < -0.5 * np.pi, psi + 2 * np.pi, psi)
-        g = self.grid
-        k = g.locate(H, psi)
-        lo, hi = self.walls
-        inside = (k >= 0) & (XX >= (lo if lo is not None else -np.inf)) & (XX <= (hi if hi is not None else np.inf))
-        kk = np.maximum(k, 0)
-        ring = g.ring[kk]
-        Hc = g.H_c[ring]
-        other = np.where(H > Hc, ring + 1, ring - 1)
-        other = np.where(other < 0, 1, other)  # extrapolate from rings 0 and 1 down to H = 0
-        other = np.clip(other, 0, g.n_rings - 1)
-        k2 = g.locate(g.H_c[other], psi)
-        ok = inside & (k2 >= 0) & (other != ring)
-        t = np.where(ok, (H - Hc) / np.where(ok, g.H_c[other] - Hc, 1.0), 0.0)
-        val = (1.0 - t) * self.cell_p[kk] + t * self.cell_p[np.maximum(k2, 0)]
-        return np.where(inside, val, 0.0)
+        XX, YY = np.meshgrid(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        return cell_values_at(self.model, self.grid, self.walls, self.cell_p, XX, YY)
 
     def _x_range(self):
         lo, hi = self.walls
@@ -263,6 +242,43 @@ class PhaseDensity:
         if self.error_estimate is not None:
             rows["estimated L1 error of p(H)"] = self.error_estimate
         return summary_html(f"PhaseDensity of {self.model.name} (fpk)", rows)
+
+
+def cell_values_at(model, grid: RingGrid, walls, values, x, y):
+    """A function known at the cell centres (``values``), at the states (x, y): linear in H between the cells of
+    neighbouring rings at the same angle (extrapolated from rings 0 and 1 below the first centre), piecewise
+    constant in angle; 0 outside the walls and above the grid.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+    >>> ones = np.ones(sd.grid.n)
+    >>> cell_values_at(sd.model, sd.grid, sd.walls, ones, np.array([0.0, 0.5]), np.array([0.0, 0.1])).tolist()
+    [1.0, 1.0]
+    """
+    XX = np.asarray(x, dtype=float)
+    YY = np.asarray(y, dtype=float)
+    G = model.potential(XX)
+    u = np.sign(XX) * np.sqrt(2.0 * np.maximum(G, 0.0))
+    H = 0.5 * YY**2 + G
+    psi = np.arctan2(YY, u)
+    psi = np.where(psi < -0.5 * np.pi, psi + 2 * np.pi, psi)
+    g = grid
+    k = g.locate(H, psi)
+    lo, hi = walls
+    inside = (k >= 0) & (XX >= (lo if lo is not None else -np.inf)) & (XX <= (hi if hi is not None else np.inf))
+    kk = np.maximum(k, 0)
+    ring = g.ring[kk]
+    Hc = g.H_c[ring]
+    other = np.where(H > Hc, ring + 1, ring - 1)
+    other = np.where(other < 0, 1, other)  # extrapolate from rings 0 and 1 down to H = 0
+    other = np.clip(other, 0, g.n_rings - 1)
+    k2 = g.locate(g.H_c[other], psi)
+    ok = inside & (k2 >= 0) & (other != ring)
+    t = np.where(ok, (H - Hc) / np.where(ok, g.H_c[other] - Hc, 1.0), 0.0)
+    val = (1.0 - t) * values[kk] + t * values[np.maximum(k2, 0)]
+    return np.where(inside, val, 0.0)
 
 
 def _coefficients(model, law):
@@ -352,6 +368,7 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
     p = disc.solve()
     t2 = time.perf_counter()
     out = PhaseDensity(model, g, disc, p, {"assemble": t1 - t0, "solve": t2 - t1}, (left, right))
+    out.discretisation = disc  # the operator itself, for first passage and spectra (averaging.phase_plane.passage)
     out.H = np.linspace(0.0, float(h_max), int(points))
     out.p = out.density(out.H)
     return out

@@ -42,14 +42,16 @@ KINDS = {
     "joint-histogram": ("x_lo", "x_hi", "y_lo", "y_hi", "count", "density"),
     "impacts": ("t", "v_minus", "H_minus", "H_plus"),
     "paths": ("t", "x", "y"),
+    "survival": ("t", "R"),
+    "spectrum": ("omega", "S"),
 }
 """Each kind and the columns that identify it (a file may carry more columns)."""
 
 GROUPS = {"energy": "energy", "energy-histogram": "energy", "joint": "joint", "joint-histogram": "joint",
-          "impacts": "impacts", "paths": "paths"}
+          "impacts": "impacts", "paths": "paths", "survival": "survival", "spectrum": "spectrum"}
 """Kinds that can share one figure."""
 
-_PRIORITY = ("joint-histogram", "energy-histogram", "impacts", "joint", "paths", "energy")
+_PRIORITY = ("joint-histogram", "energy-histogram", "impacts", "joint", "paths", "energy", "survival", "spectrum")
 """Most specific first: an mc histogram also has no 'p', a joint pdf also has 'x' and 'y'."""
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
@@ -352,6 +354,62 @@ def plot_impacts(tables, barrier_energy: float | None = None):
     return fig
 
 
+def plot_survival(tables):
+    """Survival R(t) = P(T > t) of ``vibro passage`` files, linear and log, with their bands and Poisson estimates.
+
+    Examples
+    --------
+    >>> import pandas as pd, pathlib
+    >>> df = pd.DataFrame({"t": [0, 1, 2], "R": [1, 0.5, 0.25]})
+    >>> len(plot_survival([Table(pathlib.Path("R.csv"), "survival", df, "R")]).axes)
+    2
+    """
+    fig = _figure(10.0, 4.2)
+    ax_lin, ax_log = fig.subplots(1, 2, sharex=True)
+    for i, t in enumerate(tables):
+        col = COLOURS[i % len(COLOURS)]
+        f = t.frame
+        for ax in (ax_lin, ax_log):
+            ax.plot(f["t"], f["R"], color=col, lw=1.2, label=t.label)
+            if {"R_lo", "R_hi"} <= set(f.columns):
+                ax.fill_between(f["t"], f["R_lo"], f["R_hi"], color=col, alpha=0.2, lw=0)
+            if "R_poisson" in f.columns:
+                ax.plot(f["t"], f["R_poisson"], color=col, lw=1.0, ls="--",
+                        label=f"{t.label} (Poisson)" if ax is ax_lin else None)
+    positive = [float(v) for t in tables for v in t.frame["R"] if v > 0]
+    ax_log.set_yscale("log")
+    if positive:
+        ax_log.set_ylim(max(min(positive), 1e-12), 1.5)
+    _style(ax_lin, "time t", "R(t) = P(T > t)")
+    _style(ax_log, "time t", "R(t), log scale")
+    ax_lin.legend(fontsize=FONT_PT, frameon=False)
+    return fig
+
+
+def plot_spectrum(tables):
+    """One-sided power spectral densities of ``vibro spectrum`` files, linear and log.
+
+    Examples
+    --------
+    >>> import pandas as pd, pathlib
+    >>> df = pd.DataFrame({"omega": [0, 1, 2], "S": [0.1, 1.0, 0.1]})
+    >>> len(plot_spectrum([Table(pathlib.Path("S.csv"), "spectrum", df, "S")]).axes)
+    2
+    """
+    fig = _figure(10.0, 4.2)
+    ax_lin, ax_log = fig.subplots(1, 2, sharex=True)
+    for i, t in enumerate(tables):
+        col = COLOURS[i % len(COLOURS)]
+        f = t.frame.sort_values("omega")
+        for ax in (ax_lin, ax_log):
+            ax.plot(f["omega"], f["S"], color=col, lw=1.2, label=t.label)
+    ax_log.set_yscale("log")
+    _style(ax_lin, "frequency omega", "S(omega)")
+    _style(ax_log, "frequency omega", "S(omega), log scale")
+    ax_lin.legend(fontsize=FONT_PT, frameon=False)
+    return fig
+
+
 def plot_paths(tables):
     """Sample paths or trajectories: x(t) and y(t) on two panels (one line per path).
 
@@ -443,6 +501,10 @@ def plot_files(paths, out=None, *, labels=None, barrier_energy: float | None = N
         fig = plot_joint(tables, barriers)
     elif group == "impacts":
         fig = plot_impacts(tables, barrier_energy)
+    elif group == "survival":
+        fig = plot_survival(tables)
+    elif group == "spectrum":
+        fig = plot_spectrum(tables)
     else:
         fig = plot_paths(tables)
     fig.suptitle(title or ", ".join(t.path.name for t in tables), fontsize=LABEL_PT + 1)
