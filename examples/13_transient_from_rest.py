@@ -13,7 +13,7 @@ solves the averaged forward equation (eqs. 27-29) for p(H, t | H0 = 0). Two chec
    Carlo. Averaging assumes many oscillations per change of energy; the printed table shows by how much it differs,
    in units of the Monte Carlo CI, without asking it to agree.
 
-Run:  python examples/11_transient_from_rest.py [--quick] [--outdir DIR]   (headless; exits 1 if check 1 fails)
+Run:  python examples/13_transient_from_rest.py [--quick] [--outdir DIR]   (headless; exits 1 if check 1 fails)
 """
 
 import argparse
@@ -75,7 +75,7 @@ def main(argv=None) -> int:
     except ImportError:  # pragma: no cover - matplotlib is a dependency
         plt = None
     if plt is not None:
-        outdir = Path(args.outdir) if args.outdir else Path(tempfile.mkdtemp(prefix="vibro-example-11-"))
+        outdir = Path(args.outdir) if args.outdir else Path(tempfile.mkdtemp(prefix="vibro-example-13-"))
         outdir.mkdir(parents=True, exist_ok=True)
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.errorbar(snap.times, mc, yerr=ci, fmt="o", ms=4, capsize=3, label="Monte Carlo (95 % CI)")
@@ -85,8 +85,8 @@ def main(argv=None) -> int:
         ax.set(xlabel="t", ylabel="E[H](t)", title="Example 1 from rest (x = y = 0)")
         ax.legend()
         fig.tight_layout()
-        fig.savefig(outdir / "11_transient_from_rest.png", dpi=110)
-        print(f"wrote {outdir / '11_transient_from_rest.png'}")
+        fig.savefig(outdir / "13_transient_from_rest.png", dpi=110)
+        print(f"wrote {outdir / '13_transient_from_rest.png'}")
     print("OK" if ok else "FAILED: see above")
     return 0 if ok else 1
 
