@@ -167,10 +167,10 @@ def test_api_methods_and_refusals():
     paper = vibro.first_passage(m, "H < 0.5", method="paper", points=400)
     assert paper.method == "paper" and list(paper.to_pandas().columns) == ["t", "R", "density"]
     assert abs(paper.mean_time - mean_first_passage_time(m, 0.5, 0.0, points=400)) < 1e-9
-    with pytest.raises(ParameterError, match="not built yet"):
+    with pytest.raises(ParameterError, match="needs t_max"):  # a probability of leaving before t_max
         vibro.first_passage(m, "H < 0.5", method="splitting")
-    with pytest.raises(ParameterError, match="not built yet"):
-        vibro.spectrum(m, "x", method="mc")
+    with pytest.raises(ParameterError, match="segment"):  # the Monte Carlo spectrum checks its request first
+        vibro.spectrum(m, "x", method="mc", segment=7)
     with pytest.raises(ParameterError, match="H < H_c only"):
         vibro.first_passage(m, "abs(x) < 0.5", method="jump")
     with pytest.raises(ParameterError, match="outside the domain"):
@@ -196,7 +196,8 @@ def test_cli_passage_and_spectrum_write_csv_sidecar_and_summary(tmp_path):
     S = tmp_path / "S.csv"
     assert main(["spectrum", "--grid", "20", "32", "--points", "20", "--refine", "0", "--out", str(S)]) == 0
     assert S.read_text().splitlines()[0] == "omega,S"
-    assert main(["passage", "--domain", "H < 0.5", "--method", "splitting", "--out", str(out)]) == 2
+    assert main(["passage", "--domain", "H < 0.5", "--method", "splitting", "--out", str(out)]) == 2  # no --t-max
+    assert main(["passage", "--domain", "H < 0.5", "--x0", "0", "--out", str(out)]) == 2  # a state has two numbers
 
 
 @pytest.mark.slow  # compiles a kernel of its own

@@ -2,9 +2,10 @@
 
 * ``first_passage(model, domain, x0, method=...)``: ``fpk`` (the phase-plane generator, any domain), ``paper`` and
   ``jump`` (the averaged energy, domains H < H_c), ``mc`` (an event-exact Monte Carlo ensemble of the model's
-  automaton with the domain's exit as a guard); ``splitting`` is not built yet.
-* ``spectrum(model, observable, method=...)``: ``fpk`` (the resolvent of the phase-plane generator); the Monte
-  Carlo (Welch) spectrum is not built yet.
+  automaton with the domain's exit as a transition), ``splitting`` (fixed-level splitting for small probabilities of
+  leaving before t_max).
+* ``spectrum(model, observable, method=...)``: ``fpk`` (the resolvent of the phase-plane generator) and ``mc``
+  (Welch's segment periodograms of a Monte Carlo ensemble, with a batch-means interval).
 
 Examples
 --------
@@ -33,10 +34,6 @@ from hybrid.errors import ParameterError
 
 PASSAGE_METHODS = ("fpk", "mc", "splitting", "paper", "jump")
 SPECTRUM_METHODS = ("fpk", "mc")
-NOT_BUILT = {
-    "splitting": "method 'splitting' (multilevel splitting for rare events) is not built yet; use fpk or mc",
-    "spectrum-mc": "method 'mc' (the Monte Carlo Welch spectrum) is not built yet; use fpk",
-}
 
 
 def _start(x0):
@@ -63,10 +60,12 @@ def first_passage(model, domain, x0=(0.0, 0.0), method: str = "fpk", **options) 
         The safe domain, one inequality in x, y, H and the model's parameters: ``"H < 2.0"``, ``"abs(x) <= 0.8"``.
     x0 : (x, y) or 'stationary'
         Start state (default rest), or the stationary density restricted to the domain (fpk only).
-    method : {'fpk', 'paper', 'jump', 'mc', 'auto'}
+    method : {'fpk', 'paper', 'jump', 'mc', 'splitting', 'auto'}
         ``fpk`` (default; ``auto`` is fpk): the phase-plane generator, accurate with hard impacts;
         ``paper``/``jump``: the averaged energy (H < H_c only; 15-18 % short at H_c = 2 on Example 1);
-        ``mc``: Monte Carlo (options ``paths``, ``dt``, ``t_max``, ``seed``, ``scheme``, ``events``).
+        ``mc``: event-exact Monte Carlo (options ``paths``, ``dt``, ``t_max``, ``seed``, ``scheme``, ``points``);
+        ``splitting``: P(T <= t_max) by fixed-level splitting (options ``t_max``, ``dt``, ``levels``,
+        ``clones``, ``replicas``, ``seed``, ``scheme``), for probabilities too small for ``mc``.
     **options
         Passed to the method: fpk takes ``grid``, ``h_max``, ``t_max``, ``steps``, ``check``, ``survival``;
         paper/jump take ``points``, ``t_max``, ``steps``.
@@ -87,8 +86,6 @@ def first_passage(model, domain, x0=(0.0, 0.0), method: str = "fpk", **options) 
         method = "fpk"
     if method not in PASSAGE_METHODS:
         raise ParameterError(f"method={method!r}; use one of {', '.join(PASSAGE_METHODS)} (or auto)")
-    if method == "splitting":
-        raise ParameterError(NOT_BUILT["splitting"])
     start = _start(x0)
     if method == "fpk":
         return first_passage_fpk(model, domain, start, **options)
@@ -97,6 +94,8 @@ def first_passage(model, domain, x0=(0.0, 0.0), method: str = "fpk", **options) 
         raise ParameterError(f"the start (x, y) = ({start[0]:g}, {start[1]:g}) lies outside the domain {dom.text!r}")
     if method == "mc":
         return first_passage_mc(model, dom, start, **options)
+    if method == "splitting":
+        return first_passage_splitting(model, dom, start, **options)
     return first_passage_averaged(model, dom, start, method, **options)
 
 
@@ -144,19 +143,29 @@ def first_passage_averaged(model, domain: Domain, start, method: str = "paper", 
     return FirstPassage(method, domain.text, start, mean, t, R, f, back.decay_rate(), None, details)
 
 
-MC_EVENTS = 1000
-"""Firings kept per path by ``method='mc'`` (walls and the exit); a path with more before its exit is censored."""
+def _exit_relation(model, domain: Domain):
+    """The domain as the relation phi < 0 in the automaton's states (H replaced by the model's energy)."""
+    import sympy as sp
+
+    from models import X, Y
+
+    base = model.to_automaton()
+    phi = domain.phi
+    energy = base.observables.get("H")
+    if energy is not None:
+        phi = phi.subs(sp.Symbol("H"), energy)
+    return base, sp.StrictLessThan(phi.subs({X: base.states[0], Y: base.states[1]}), 0)
 
 
 def first_passage_mc(model, domain: Domain, start, *, paths: int = 2000, dt: float = 0.002,
-                     t_max: float | None = None, seed: int = 1, scheme: str = "baoab", events: int = MC_EVENTS,
-                     points: int = 400) -> FirstPassage:
-    """First passage by Monte Carlo: the model's automaton with one more transition, the exit (guard phi = 0 of
-    the domain phi < 0, upwards), into a copy of its mode; crossings are located inside the step for every scheme.
+                     t_max: float | None = None, seed: int = 1, scheme: str = "baoab", points: int = 400,
+                     chunk_paths: int | None = None) -> FirstPassage:
+    """First passage by event-exact Monte Carlo (:func:`hybrid.stochastic.simulate_first_passage`).
 
-    R(t) is the fraction of paths not yet out (95 % Wilson band in R_lo, R_hi); ``error_estimate`` is the 95 %
-    half-width of the mean. Paths still inside at ``t_max`` (or whose exit lies beyond the ``events`` firings
-    kept) are censored: the mean is then over the others and a :class:`PassageWarning` says how many.
+    The exit is a transition into an absorbing mode, located inside the step for every scheme; R(t) counts every
+    path at ``points`` times (95 % Wilson band in R_lo, R_hi); ``error_estimate`` is the 95 % half-width of the
+    mean. Paths still inside at ``t_max`` are censored: the mean is then that of min(T, t_max), a lower bound, and
+    a warning says how many.
 
     Examples
     --------
@@ -164,59 +173,65 @@ def first_passage_mc(model, domain: Domain, start, *, paths: int = 2000, dt: flo
     >>> m = DuffingImpact(restitution=Ma(0.4))
     >>> r = first_passage_mc(m, Domain("H < 0.25", m), (0.0, 0.0), paths=64, t_max=60.0)   # doctest: +SKIP
     """
-    import sympy as sp
-
-    from hybrid import HybridAutomaton, Mode, Transition
-    from hybrid.stochastic import simulate_automaton
-    from models import X, Y
+    from hybrid.stochastic import simulate_first_passage
 
     if isinstance(start, str):
         raise ParameterError("method 'mc' starts from a state; x0='stationary' is for method='fpk'")
     if t_max is None:
         raise ParameterError("method 'mc' needs t_max (the end of every path; paths still inside are censored)")
-    base = model.to_automaton()
-    if len(base.modes) != 1:
-        raise ParameterError("method 'mc' takes a model with one mode (an unforced oscillator)")
-    free = base.modes[0]
-    energy = base.observables.get("H")
-    phi = domain.phi
-    if energy is not None:
-        phi = phi.subs(sp.Symbol("H"), energy)
-    phi = phi.subs({X: base.states[0], Y: base.states[1]})
-    out = Mode("out", free.flow, free.noise)
-    transitions = [Transition("exit", free.name, "out", phi, 1, base.states)]
-    for t in base.transitions:
-        transitions.append(Transition(t.name, t.source, t.target, t.guard, t.direction, t.reset,
-                                      priority=t.priority + 1, check=t.check))
-        transitions.append(Transition(f"{t.name}_out", "out", "out", t.guard, t.direction, t.reset,
-                                      priority=t.priority + 1, check=t.check))
-    automaton = HybridAutomaton(base.states, dict(base.parameters), [free, out], transitions,
-                                observables=dict(base.observables))
+    base, relation = _exit_relation(model, domain)
     t0 = time.perf_counter()
-    first_obs = next(iter(base.observables)) if base.observables else None
-    ens = simulate_automaton(automaton, scheme, dt=dt, paths=paths, t_end=float(t_max), x0=tuple(start), seed=seed,
-                             events=events, histograms={first_obs: None} if first_obs else None, check_dt=False)
-    T = ens.first_event_times("exit")
-    censored = ~np.isfinite(T)
-    done = T[~censored]
-    if len(done) < 2:
-        raise ParameterError(f"fewer than two of {paths} paths left {domain.text!r} by t_max={t_max:g}: raise t_max")
-    mean = float(done.mean())
-    half = float(1.96 * done.std(ddof=1) / np.sqrt(len(done)))
-    if censored.any():
-        warnings.warn(f"{int(censored.sum())} of {paths} paths were censored (still inside at t_max={t_max:g} or "
-                      f"more than {events} firings before the exit): the mean is over the others and short",
-                      PassageWarning, stacklevel=2)
-    t = np.linspace(0.0, float(t_max), int(points) + 1)
-    Tc = np.where(censored, np.inf, T)
-    R = np.array([np.mean(Tc > s) for s in t])
-    lo, hi = _wilson(R, paths)
+    chunk = chunk_paths or max(1, min(64, paths // 16))
+    run = simulate_first_passage(base, relation, scheme, dt=dt, paths=paths, t_max=float(t_max), x0=tuple(start),
+                                 seed=seed, snapshots=int(points), chunk_paths=chunk)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        est = run.mean_time()
+    for w in caught:  # censoring: said once, as this module's warning
+        warnings.warn(str(w.message), PassageWarning, stacklevel=2)
+    table = run.to_pandas()
+    t, R = table["t"].to_numpy(), table["R"].to_numpy()
     dens = np.concatenate([[0.0], (R[:-1] - R[1:]) / np.diff(t)])
-    details = {"paths": int(paths), "dt": float(dt), "scheme": scheme, "seed": int(seed),
-               "censored": int(censored.sum()), "seconds": time.perf_counter() - t0, "ci": [mean - half, mean + half]}
-    res = FirstPassage("mc", domain.text, start, mean, t, R, dens, float("nan"), half, details)
-    res.R_lo, res.R_hi = lo, hi
-    res.times = T
+    details = {"paths": int(paths), "dt": float(dt), "scheme": scheme, "seed": int(seed), "chunk_paths": chunk,
+               "censored": run.censored, "seconds": time.perf_counter() - t0,
+               "ci": [est.value - est.ci, est.value + est.ci]}
+    res = FirstPassage("mc", domain.text, start, est.value, t, R, dens, float("nan"), est.ci, details)
+    res.R_lo, res.R_hi = table["R_lo"].to_numpy(), table["R_hi"].to_numpy()
+    return res
+
+
+def first_passage_splitting(model, domain: Domain, start, *, t_max: float | None = None, dt: float = 0.002,
+                            levels: int = 10, clones: int = 1000, replicas: int = 8, seed: int = 1,
+                            scheme: str = "baoab") -> FirstPassage:
+    """P(T <= t_max), the probability of leaving the domain before ``t_max``, by fixed-level splitting
+    (:func:`hybrid.stochastic.splitting_probability`, for small probabilities).
+
+    The importance function is the domain's slack phi (the domain is phi < 0); ``levels`` equally spaced levels
+    lead from phi(x0) to 0. The result's R is [1, 1 - P] at t = [0, t_max] with the 95 % interval of the replicas
+    in R_lo, R_hi; it has no mean time (NaN). ``details`` holds the probability, its CI, the stage shares and the
+    cost against brute force.
+    """
+    from hybrid.stochastic import splitting_probability
+
+    if isinstance(start, str):
+        raise ParameterError("method 'splitting' starts from a state; x0='stationary' is for method='fpk'")
+    if t_max is None:
+        raise ParameterError("method 'splitting' needs t_max (the probability is that of leaving before t_max)")
+    base, relation = _exit_relation(model, domain)
+    t0 = time.perf_counter()
+    est = splitting_probability(base, relation.lhs, 0.0, levels=levels, t_max=float(t_max), x0=tuple(start), dt=dt,
+                                clones=clones, replicas=replicas, scheme=scheme, seed=seed)
+    P, half = est.probability, est.ci
+    details = {"probability": P, "ci": [P - half, P + half], "levels": est.levels.tolist(),
+               "stage_shares": est.stage_shares.mean(axis=0).tolist(), "path_steps": est.path_steps,
+               "brute_force_steps": est.brute_force_steps, "speedup": est.speedup, "clones": int(clones),
+               "replicas": int(replicas), "dt": float(dt), "scheme": scheme, "seed": int(seed),
+               "seconds": time.perf_counter() - t0}
+    t = np.array([0.0, float(t_max)])
+    res = FirstPassage("splitting", domain.text, start, float("nan"), t, np.array([1.0, 1.0 - P]),
+                       np.array([0.0, 0.0]), float("nan"), half, details)
+    res.R_lo = np.array([1.0, max(0.0, 1.0 - P - half)])
+    res.R_hi = np.array([1.0, min(1.0, 1.0 - P + half)])
     return res
 
 
@@ -235,12 +250,12 @@ def spectrum(model, observable: str = "x", method: str = "fpk", **options) -> Sp
     model : ImpactOscillator
     observable : str
         Expression in x, y, H and the model's parameters.
-    method : {'fpk', 'auto'}
+    method : {'fpk', 'mc', 'auto'}
         ``fpk`` (``auto``): one complex sparse solve of the phase-plane generator's resolvent per frequency;
-        ``mc`` (Welch) is not built yet.
+        ``mc``: Welch's periodograms of a Monte Carlo ensemble (:func:`spectrum_mc`).
     **options
-        ``omega``, ``omega_max``, ``points``, ``refine``, ``grid``, ``h_max`` (see
-        :func:`averaging.phase_plane.spectrum.spectrum_fpk`).
+        fpk: ``omega``, ``omega_max``, ``points``, ``refine``, ``grid``, ``h_max`` (see
+        :func:`averaging.phase_plane.spectrum.spectrum_fpk`); mc: see :func:`spectrum_mc`.
 
     Returns
     -------
@@ -260,5 +275,22 @@ def spectrum(model, observable: str = "x", method: str = "fpk", **options) -> Sp
     if method not in SPECTRUM_METHODS:
         raise ParameterError(f"method={method!r}; use one of {', '.join(SPECTRUM_METHODS)} (or auto)")
     if method == "mc":
-        raise ParameterError(NOT_BUILT["spectrum-mc"])
+        return spectrum_mc(model, observable, **options)
     return spectrum_fpk(model, observable, **options)
+
+
+def spectrum_mc(model, observable: str = "x", *, dt: float = 0.01, t_end: float = 2100.0, t_burn: float = 100.0,
+                paths: int = 64, every: int = 20, segment: int = 512, chunk_paths: int = 8, seed: int = 1,
+                scheme: str = "splitting") -> Spectrum:
+    """The one-sided PSD by Monte Carlo (Welch, :func:`hybrid.stochastic._welch.welch_spectrum`), as a
+    :class:`Spectrum` with the 95 % batch-means half-width per frequency in ``details['ci']``.
+
+    The variance is the samples' own, so ``variance_check`` tests the normalisation; the frequency resolution
+    2 pi / (segment every dt) and the band edge pi / (every dt) are in ``details``.
+    """
+    from hybrid.stochastic._welch import welch_spectrum
+
+    w = welch_spectrum(model, observable, scheme, dt=dt, t_end=t_end, t_burn=t_burn, paths=paths, every=every,
+                       segment=segment, chunk_paths=chunk_paths, seed=seed)
+    return Spectrum("mc", observable, w.omega, w.S, w.variance, w.mean,
+                    details={"ci": w.ci, "chunks": w.chunks, **w.settings})

@@ -126,7 +126,8 @@ def _wilson(k: np.ndarray, n: int, z: float = 1.959963984540054) -> tuple[np.nda
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return centre - half, centre + half
+    # the interval holds p (at p = 0 or 1 rounding can put an end a hair inside) and lies in [0, 1]
+    return np.clip(np.minimum(centre - half, p), 0, 1), np.clip(np.maximum(centre + half, p), 0, 1)
 
 
 @dataclass
