@@ -272,7 +272,8 @@ def unforced(model):
 
 def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: int = DEFAULT_STEPS,
                         phases: int | None = None, walls="model", restitution=None, points: int = 2000,
-                        tol: float = 1e-10, max_iterations: int = 300) -> PeriodicDensity:
+                        tol: float = 1e-10, max_iterations: int = 300,
+                        scheme: str = "cn") -> PeriodicDensity:
     """Periodic density p(x, y, t) of a periodically forced ``model`` with impact boundary conditions.
 
     Parameters
@@ -342,6 +343,8 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
         raise ParameterError(f"steps={steps} must be at least 4 per period")
     if int(points) != points or points < 3:
         raise ParameterError(f"points={points!r} must be an integer >= 3")
+    if scheme not in ("bdf2", "cn"):
+        raise ParameterError(f"scheme={scheme!r}: use 'bdf2' (L-stable) or 'cn' (Crank-Nicolson)")
     cells = float(n_e) * float(n_p)
     factors = steps // 2 + 1
     check_size(f"the forced phase-plane solve on {n_e} x {n_p} cells and {steps} steps",
@@ -377,8 +380,11 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
         operators.append(disc.operator_with_drift(mr, ma))
         drifts.append(np.concatenate([mr, ma]))
     t1 = time.perf_counter()
-    # BDF2 steps (3/2 M + A(t_{k+1})) p_{k+1} = M (2 p_k - p_{k-1} / 2): one LU per distinct drift (a harmonic
-    # forcing takes each value twice a period)
+    # implicit steps: BDF2 (3/2 M + A(t_{k+1})) p_{k+1} = M (2 p_k - p_{k-1} / 2), or Crank-Nicolson
+    # (M + A(t_{k+1}) / 2) p_{k+1} = (M - A(t_k) / 2) p_k; one LU per distinct drift (a harmonic forcing takes each
+    # value twice a period)
+    bdf2 = scheme == "bdf2"
+    mass_coef, op_coef = (1.5, 1.0) if bdf2 else (1.0, 0.5)
     scale = max(float(np.max(np.abs(d))) for d in drifts)
     distinct, lus, step_lu = [], [], []
     for k in range(steps):
@@ -386,39 +392,43 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
         same = next((i for i, e in enumerate(distinct) if np.allclose(d, e, rtol=1e-12, atol=1e-12 * scale)), None)
         if same is None:
             distinct.append(d)
-            lus.append(_factor((1.5 * M + operators[(k + 1) % steps]).tocsc()))
+            lus.append(_factor((mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsc()))
             same = len(lus) - 1
         step_lu.append(lus[same])
+    explicit = None if bdf2 else [(M - 0.5 * A).tocsr() for A in operators]
     t2 = time.perf_counter()
     w = disc.mass_weight
     n = g.n
 
     def march(before, now, count):
-        """``count`` BDF2 steps from (p_{-1}, p_0) = (before, now); yields every new density."""
+        """``count`` steps from (p_{-1}, p_0) = (before, now) (CN ignores p_{-1}); yields every new density."""
         for k in range(count):
-            before, now = now, step_lu[k].solve(M @ (2.0 * now - 0.5 * before))
+            rhs = M @ (2.0 * now - 0.5 * before) if bdf2 else explicit[k] @ now
+            before, now = now, step_lu[k].solve(rhs)
             yield now
 
     p0 = disc.solve()  # the unforced density: the start, and the vector of the rank-one term
     p0 = p0 / (w @ p0)
-    start = np.concatenate([p0, p0])
+    size = 2 * n if bdf2 else n
+    start = np.concatenate([p0, p0]) if bdf2 else p0
     maps = [0]
 
     def apply(z):
-        # z - P z + start (3 w.z_now - w.z_before) / 2: BDF2 keeps 3 m_k - m_{k-1} (= 2 at the fixed point), the
-        # rank-one term removes P's eigenvalue 1 without moving the fixed point
+        # z - P z + start I(z): I is the probability the steps keep (BDF2: (3 m_k - m_{k-1}) / 2, CN: m_k; 1 at the
+        # fixed point); the rank-one term removes P's eigenvalue 1 without moving the fixed point
         maps[0] += 1
-        before, now = z[:n], z[n:]
+        before, now = (z[:n], z[n:]) if bdf2 else (z, z)
         *_, last, end = march(before, now, steps)
-        return z - np.concatenate([last, end]) + start * (0.5 * (3.0 * (w @ now) - w @ before))
+        kept = 0.5 * (3.0 * (w @ now) - w @ before) if bdf2 else w @ now
+        return z - (np.concatenate([last, end]) if bdf2 else end) + start * kept
 
-    op = spla.LinearOperator((2 * n, 2 * n), matvec=apply, dtype=float)
+    op = spla.LinearOperator((size, size), matvec=apply, dtype=float)
     z, info = spla.gmres(op, start, x0=start, rtol=tol, atol=0.0, restart=min(max_iterations, 100),
                          maxiter=max(1, max_iterations // 100 + 1))
     if info != 0 or not np.all(np.isfinite(z)):
         raise NormalisationError(f"GMRES did not find the periodic density in {maps[0]} period maps (info {info}): "
                                  "the forcing may drive the energy without bound, or h_max is far too small")
-    before, p = z[:n], z[n:]
+    before, p = (z[:n], z[n:]) if bdf2 else (z, z)
     snapshots = [p, *march(before, p, steps)]
     back = snapshots.pop()
     t3 = time.perf_counter()
