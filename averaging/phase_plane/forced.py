@@ -30,8 +30,9 @@ about K/2 factors are computed (the matrices are keyed by the drift they hold).
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): the grid was designed for densities that are
 uniform along the free orbits, where the convection along the rings costs nothing; a forced density is a blob that
 moves around the rings, and its along-ring discretisation error dominates. On example 08 (D = 0.02) the L1 of
-p(H | t) against Monte Carlo is 0.024 at the default grid and 64 steps (12 s) and 0.014 at (160, 192) (29 s),
-second order in the grid; the linear oscillator's section moments are within 1.3e-2 (mean) and 8e-3 (variance).
+p(H | t) against Monte Carlo is 0.024 at the default grid and 64 steps (8 s CPU, 0.8 GB) and 0.014 at (160, 192)
+(24 s, 1.9 GB), second order in the grid; the linear oscillator's section moments are within 1.3e-2 (mean) and
+8e-3 (variance) at (160, 192).
 
 Outputs (:class:`PeriodicDensity`): the density at any time of the period (``section(t)``, a
 :class:`~averaging.phase_plane.PhaseDensity` with p(H | t), p(x, y | t), marginals and impacts; between the K
