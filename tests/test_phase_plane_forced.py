@@ -104,7 +104,8 @@ def test_refusals():
 def test_cli_pdf_fpk_forced_writes_the_sections_of_vibro_mc(tmp_path, capsys):
     out = tmp_path / "p.csv"
     rc = main(["pdf", "--method", "fpk", "--model", "duffing-forced", "--param", "D=0.02", "--grid", "40", "48",
-               "--steps", "16", "--phases", "4", "--bins", "40", "--xy-bins", "20", "20", "--out", str(out)])
+               "--steps", "16", "--phases", "4", "--bins", "40", "--xy-bins", "20", "20", "--out", str(out),
+               "--joint", str(tmp_path / "j.csv"), "--joint-points", "41"])
     assert rc == 0
     text = capsys.readouterr().out
     assert "E[H | t]" in text
@@ -117,6 +118,8 @@ def test_cli_pdf_fpk_forced_writes_the_sections_of_vibro_mc(tmp_path, capsys):
         mass = ((rows.hi - rows.lo) * rows.density).sum()
         assert mass == pytest.approx(1.0, abs=1e-9 if name == "H" else 1e-2)
     assert (tmp_path / "p.csv").exists()
+    joint = pd.read_csv(tmp_path / "j.csv")  # the time-averaged p(x, y) (its box from the unforced energy levels)
+    assert list(joint.columns) == ["x", "y", "p"] and len(joint) == 41 * 41 and joint.p.max() > 0
 
 
 def test_cli_phases_on_an_unforced_model_is_one_line(tmp_path, capsys):

@@ -141,10 +141,12 @@ def _run_forced(args, model, plan) -> int:
     sd = sol.mean
     _check_resolved(args, sd)
     if args.joint is not None:
+        from averaging.phase_plane.forced import unforced
         from averaging.quadrature import turning_points
 
         left, right = model.barriers
-        lo, hi = (float(v[0]) for v in turning_points(model, args.h_max))
+        # the box of the unforced energy levels up to h_max (turning points are those of g, not of the forcing)
+        lo, hi = (float(v[0]) for v in turning_points(unforced(model), args.h_max))
         x = np.linspace(max(left, lo), min(right, hi), args.joint_points)
         ymax = np.sqrt(2.0 * args.h_max)
         y = np.linspace(-ymax, ymax, args.joint_points)
