@@ -15,7 +15,7 @@ from problems import elastic_duffing
 
 from averaging.phase_plane import solve_phase_plane
 from averaging.phase_plane.forced import periodic_density_xy, unforced
-from hybrid.errors import ModelError, ParameterError
+from hybrid.errors import ModelError, NormalisationError, ParameterError
 from models import Elastic, ForcedDuffingImpact, ImpactOscillator, Newton
 from vibro.cli import main
 
@@ -99,6 +99,19 @@ def test_refusals():
         periodic_density_xy(ForcedDuffingImpact(), steps=0)
     with pytest.raises(ParameterError, match="scheme"):
         periodic_density_xy(ForcedDuffingImpact(), scheme="rk4")
+    # an h_max below the mass: refused from the unforced density, before any period map
+    with pytest.raises(NormalisationError, match="does not decay"):
+        periodic_density_xy(ForcedDuffingImpact(), grid=(40, 48), steps=8, h_max=1e-9)
+
+
+def test_a_huge_h_max_puts_the_rings_where_the_mass_is():
+    # h_max = 1e12 would put the whole density into the first ring; the rings are fitted to the energies the
+    # unforced density reaches (doubled), and the answer is that of a moderate h_max
+    m = ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=0.02)
+    huge = periodic_density_xy(m, grid=(40, 48), steps=16, h_max=1e12)
+    moderate = periodic_density_xy(m, grid=(40, 48), steps=16, h_max=huge.grid.h_max)
+    assert huge.grid.h_max < 100 and huge.mean.h_max == 1e12
+    assert huge.mean_energy == pytest.approx(moderate.mean_energy, rel=1e-12)
 
 
 def test_cli_pdf_fpk_forced_writes_the_sections_of_vibro_mc(tmp_path, capsys):

@@ -64,6 +64,7 @@ from hybrid.sizes import check_size
 from models import X, Y
 from models.oscillator import _CACHED, T
 
+from ..stationary import check_energy_range
 from ._core import Discretisation
 from ._grid import RingGrid
 from .solver import DEFAULT_STRETCH, GridWarning, PhaseDensity, _coefficients, _walls
@@ -366,94 +367,117 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
                       f"{cells * factors * SECONDS_PER_CELL_FACTOR:.3g} s",
                fix=f"use a coarser grid or fewer steps (the defaults are {FORCED_GRID} and {DEFAULT_STEPS})")
 
-    t0 = time.perf_counter()
-    law = restitution if restitution is not None else model.restitution
-    left, right = _walls(model, walls)
-    wall_H = {}
-    if right is not None:
-        wall_H["right"] = float(model.potential(np.array([right]))[0])
-    if left is not None:
-        wall_H["left"] = float(model.potential(np.array([left]))[0])
-    g = RingGrid(float(h_max), n_e, n_p, wall_H, DEFAULT_STRETCH)
-    disc = Discretisation(g, _coefficients(free, law), law.coefficient, 2, PHASE_ORDER)
-    disc.cell_H = g.H_c[g.ring]
-    disc.walls_at = (left, right)
-    drift = sp.lambdify((X, Y, T), model.substitute(model.ito_drift + model.g), "numpy")
-    (xr, yr), (xa, ya) = disc.drift_points()
-    dt = period / steps
-    times = dt * np.arange(steps)
-    M = sps.diags(disc.mass_weight / dt)
-    operators, drifts = [], []
-    for t in times:
-        with np.errstate(all="ignore"):
-            mr = np.broadcast_to(np.asarray(drift(xr, yr, t), dtype=float), xr.shape)
-            ma = np.broadcast_to(np.asarray(drift(xa, ya, t), dtype=float), xa.shape)
-        if not (np.all(np.isfinite(mr)) and np.all(np.isfinite(ma))):
-            raise ModelError(f"the drift with the forcing F = {model.forcing} is not finite at t = {t:.6g}")
-        operators.append(disc.operator_with_drift(mr, ma))
-        drifts.append(np.concatenate([mr, ma]))
-    t1 = time.perf_counter()
-    # implicit steps: BDF2 (3/2 M + A(t_{k+1})) p_{k+1} = M (2 p_k - p_{k-1} / 2), or Crank-Nicolson
-    # (M + A(t_{k+1}) / 2) p_{k+1} = (M - A(t_k) / 2) p_k; one LU per distinct drift (a harmonic forcing takes each
-    # value twice a period)
-    bdf2 = scheme == "bdf2"
-    mass_coef, op_coef = (1.5, 1.0) if bdf2 else (1.0, 0.5)
-    scale = max(float(np.max(np.abs(d))) for d in drifts)
-    distinct, lus, step_lu = [], [], []
-    for k in range(steps):
-        d = drifts[(k + 1) % steps]
-        same = next((i for i, e in enumerate(distinct) if np.allclose(d, e, rtol=1e-12, atol=1e-12 * scale)), None)
-        if same is None:
-            distinct.append(d)
-            lus.append(_factor((mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsc()))
-            same = len(lus) - 1
-        step_lu.append(lus[same])
-    explicit = None if bdf2 else [(M - 0.5 * A).tocsr() for A in operators]
-    t2 = time.perf_counter()
-    w = disc.mass_weight
-    n = g.n
+    check_energy_range(free, float(h_max), walls)
+    from .solver import _first_range
 
-    def march(before, now, count):
-        """``count`` steps from (p_{-1}, p_0) = (before, now) (CN ignores p_{-1}); yields every new density."""
-        for k in range(count):
-            rhs = M @ (2.0 * now - 0.5 * before) if bdf2 else explicit[k] @ now
-            before, now = now, step_lu[k].solve(rhs)
-            yield now
+    def solve_on(h):
+        t0 = time.perf_counter()
+        law = restitution if restitution is not None else model.restitution
+        left, right = _walls(model, walls)
+        wall_H = {}
+        if right is not None:
+            wall_H["right"] = float(model.potential(np.array([right]))[0])
+        if left is not None:
+            wall_H["left"] = float(model.potential(np.array([left]))[0])
+        g = RingGrid(float(h), n_e, n_p, wall_H, DEFAULT_STRETCH)
+        disc = Discretisation(g, _coefficients(free, law), law.coefficient, 2, PHASE_ORDER)
+        disc.cell_H = g.H_c[g.ring]
+        disc.walls_at = (left, right)
+        drift = sp.lambdify((X, Y, T), model.substitute(model.ito_drift + model.g), "numpy")
+        (xr, yr), (xa, ya) = disc.drift_points()
+        dt = period / steps
+        times = dt * np.arange(steps)
+        M = sps.diags(disc.mass_weight / dt)
+        operators, drifts = [], []
+        for t in times:
+            with np.errstate(all="ignore"):
+                mr = np.broadcast_to(np.asarray(drift(xr, yr, t), dtype=float), xr.shape)
+                ma = np.broadcast_to(np.asarray(drift(xa, ya, t), dtype=float), xa.shape)
+            if not (np.all(np.isfinite(mr)) and np.all(np.isfinite(ma))):
+                raise ModelError(f"the drift with the forcing F = {model.forcing} is not finite at t = {t:.6g}")
+            operators.append(disc.operator_with_drift(mr, ma))
+            drifts.append(np.concatenate([mr, ma]))
+        t1 = time.perf_counter()
+        # implicit steps: BDF2 (3/2 M + A(t_{k+1})) p_{k+1} = M (2 p_k - p_{k-1} / 2), or Crank-Nicolson
+        # (M + A(t_{k+1}) / 2) p_{k+1} = (M - A(t_k) / 2) p_k; one LU per distinct drift (a harmonic forcing takes each
+        # value twice a period)
+        bdf2 = scheme == "bdf2"
+        mass_coef, op_coef = (1.5, 1.0) if bdf2 else (1.0, 0.5)
+        scale = max(float(np.max(np.abs(d))) for d in drifts)
+        distinct, lus, step_lu = [], [], []
+        for k in range(steps):
+            d = drifts[(k + 1) % steps]
+            same = next((i for i, e in enumerate(distinct) if np.allclose(d, e, rtol=1e-12, atol=1e-12 * scale)), None)
+            if same is None:
+                distinct.append(d)
+                lus.append(_factor((mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsc()))
+                same = len(lus) - 1
+            step_lu.append(lus[same])
+        explicit = None if bdf2 else [(M - 0.5 * A).tocsr() for A in operators]
+        t2 = time.perf_counter()
+        w = disc.mass_weight
+        n = g.n
 
-    p0 = disc.solve()  # the unforced density: the start, and the vector of the rank-one term
-    p0 = p0 / (w @ p0)
-    size = 2 * n if bdf2 else n
-    start = np.concatenate([p0, p0]) if bdf2 else p0
-    maps = [0]
+        def march(before, now, count):
+            """``count`` steps from (p_{-1}, p_0) = (before, now) (CN ignores p_{-1}); yields every new density."""
+            for k in range(count):
+                rhs = M @ (2.0 * now - 0.5 * before) if bdf2 else explicit[k] @ now
+                before, now = now, step_lu[k].solve(rhs)
+                yield now
 
-    def apply(z):
-        # z - P z + start I(z): I is the probability the steps keep (BDF2: (3 m_k - m_{k-1}) / 2, CN: m_k; 1 at the
-        # fixed point); the rank-one term removes P's eigenvalue 1 without moving the fixed point
-        maps[0] += 1
-        before, now = (z[:n], z[n:]) if bdf2 else (z, z)
-        *_, last, end = march(before, now, steps)
-        kept = 0.5 * (3.0 * (w @ now) - w @ before) if bdf2 else w @ now
-        return z - (np.concatenate([last, end]) if bdf2 else end) + start * kept
+        p0 = disc.solve()  # the unforced density: the start, and the vector of the rank-one term
+        p0 = p0 / (w @ p0)
+        rho0 = np.bincount(g.ring, p0 * w, g.n_rings) / g.dH
+        if h >= h_max and rho0[-1] > 0.2 * rho0.max():  # not even the unforced density fits: refuse before GMRES
+            raise NormalisationError(f"p(H) does not decay towards h_max={h_max:g} even without the forcing: raise "
+                                     "h_max or add dissipation")
+        size = 2 * n if bdf2 else n
+        start = np.concatenate([p0, p0]) if bdf2 else p0
+        maps = [0]
 
-    op = spla.LinearOperator((size, size), matvec=apply, dtype=float)
-    z, info = spla.gmres(op, start, x0=start, rtol=tol, atol=0.0, restart=min(max_iterations, 100),
-                         maxiter=max(1, max_iterations // 100 + 1))
-    if info != 0 or not np.all(np.isfinite(z)):
-        raise NormalisationError(f"GMRES did not find the periodic density in {maps[0]} period maps (info {info}): "
-                                 "the forcing may drive the energy without bound, or h_max is far too small")
-    before, p = (z[:n], z[n:]) if bdf2 else (z, z)
-    snapshots = [p, *march(before, p, steps)]
-    back = snapshots.pop()
-    t3 = time.perf_counter()
-    out = PeriodicDensity(model, g, disc, times, period, snapshots, operators, points, h_max)
-    out.periodicity = float(np.max(np.abs(back - p)) / np.max(np.abs(p)))
-    out.iterations = maps[0]
-    out.factors = len(lus)
-    out.timing = {"assemble": t1 - t0, "factor": t2 - t1, "solve": t3 - t2}
-    rho = out.mean.ring_mass / g.dH
-    if rho[-1] > 0.2 * rho.max():
+        def apply(z):
+            # z - P z + start I(z): I is the probability the steps keep (BDF2: (3 m_k - m_{k-1}) / 2, CN: m_k; 1 at the
+            # fixed point); the rank-one term removes P's eigenvalue 1 without moving the fixed point
+            maps[0] += 1
+            before, now = (z[:n], z[n:]) if bdf2 else (z, z)
+            *_, last, end = march(before, now, steps)
+            kept = 0.5 * (3.0 * (w @ now) - w @ before) if bdf2 else w @ now
+            return z - (np.concatenate([last, end]) if bdf2 else end) + start * kept
+
+        op = spla.LinearOperator((size, size), matvec=apply, dtype=float)
+        z, info = spla.gmres(op, start, x0=start, rtol=tol, atol=0.0, restart=min(max_iterations, 100),
+                             maxiter=max(1, max_iterations // 100 + 1))
+        if info != 0 or not np.all(np.isfinite(z)):
+            raise NormalisationError(f"GMRES did not find the periodic density in {maps[0]} period maps (info {info}): "
+                                     "the forcing may drive the energy without bound, or h_max is far too small")
+        before, p = (z[:n], z[n:]) if bdf2 else (z, z)
+        snapshots = [p, *march(before, p, steps)]
+        back = snapshots.pop()
+        t3 = time.perf_counter()
+        out = PeriodicDensity(model, g, disc, times, period, snapshots, operators, points, h_max)
+        out.periodicity = float(np.max(np.abs(back - p)) / np.max(np.abs(p)))
+        out.iterations = maps[0]
+        out.factors = len(lus)
+        out.timing = {"assemble": t1 - t0, "factor": t2 - t1, "solve": t3 - t2}
+        return out
+
+    # the rings on the energies the unforced density reaches (e**-40 below its peak), doubled for the forcing's
+    # energy, so that a large h_max does not put the mass into the first few rings; widened while mass reaches the top
+    h = min(float(h_max), 2.0 * _first_range(free, float(h_max)))
+    out = solve_on(h)
+
+    def top_mass(sol):
+        return float(sol.mean.ring_mass[sol.grid.H_c > 0.9 * sol.grid.h_max].sum())
+
+    for _ in range(4):
+        if top_mass(out) <= 1e-4 or h >= h_max:
+            break
+        h = min(float(h_max), 4.0 * h)
+        out = solve_on(h)
+    rho = out.mean.ring_mass / out.grid.dH
+    if h >= h_max and rho[-1] > 0.2 * rho.max():
         raise NormalisationError(f"p(H) does not decay towards h_max={h_max:g}: raise h_max or add dissipation")
-    tail = float(out.mean.ring_mass[g.H_c > 0.9 * h_max].sum())
+    tail = top_mass(out)
     if tail > 1e-4:
         warnings.warn(f"{tail:.2g} of the time-averaged probability lies in the top 10% of [0, h_max={h_max:g}]: "
                       "raise h_max", GridWarning, stacklevel=2)
