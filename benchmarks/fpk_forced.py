@@ -115,12 +115,14 @@ def linear(grids):
 
 
 def main(quick: bool) -> None:
-    grids = [((60, 64), 32), ((120, 128), 64)] if quick else [((60, 64), 32), ((80, 96), 64), ((160, 192), 64),
-                                                               ((120, 128), 64)]
+    # consecutive grids a factor 2 apart with the same steps also give the Richardson row
+    grids = [((60, 64), 64), ((120, 128), 64)]
+    if not quick:
+        grids += [((80, 96), 64), ((160, 192), 64)]
     against_mc(grids, "0.02")
     if not quick:
-        against_mc(grids[-1:], "0.05")
-    linear(grids[:2] if quick else [grids[0], grids[3], grids[2]])
+        against_mc(grids[:2], "0.05")
+    linear(grids[:2] if quick else [grids[0], grids[1], grids[3]])
 
 
 if __name__ == "__main__":

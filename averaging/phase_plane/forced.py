@@ -260,6 +260,101 @@ class _Shim:
         self.walls = disc.walls
 
 
+class ExtrapolatedSection:
+    """Richardson extrapolation (4 fine - coarse) / 3 of two :class:`PhaseDensity` on grids a factor 2 apart.
+
+    The phase-plane solver converges at second order in the grid, so the combination removes the leading error of
+    every linear functional: p(H) and its bin masses, the marginals, p(x, y), E[H], E[x**2], the impact rate. The
+    combination may dip slightly below 0 where the density is near 0 (it keeps the total probability exactly).
+    """
+
+    method = "fpk"
+
+    def __init__(self, fine: PhaseDensity, coarse: PhaseDensity):
+        self.fine, self.coarse = fine, coarse
+        self.model, self.grid, self.walls = fine.model, fine.grid, fine.walls
+        self.h_max, self.h_support = fine.h_max, max(fine.h_support, coarse.h_support)
+        for name in ("mean_energy", "mean_x2", "mean_y2", "prob_below_barrier", "impact_rate"):
+            setattr(self, name, self._combine(getattr(fine, name), getattr(coarse, name)))
+        self.impact_rates = {k: self._combine(v, coarse.impact_rates[k]) for k, v in fine.impact_rates.items()}
+        self.H = fine.H
+        self.p = self.density(self.H)
+        self.error_estimate = None
+
+    @staticmethod
+    def _combine(fine, coarse):
+        return (4.0 * np.asarray(fine) - np.asarray(coarse)) / 3.0
+
+    def density(self, H):
+        """p(H) at the energies ``H``."""
+        return self._combine(self.fine.density(H), self.coarse.density(H))
+
+    def bin_masses(self, edges):
+        """Probability of each energy bin [edges[k], edges[k+1]]."""
+        return self._combine(self.fine.bin_masses(edges), self.coarse.bin_masses(edges))
+
+    def joint(self, x, y):
+        """p(x, y) on the grid x by y -> array (ny, nx)."""
+        return self._combine(self.fine.joint(x, y), self.coarse.joint(x, y))
+
+    def marginal_x(self, x, points: int = 801):
+        """p(x)."""
+        return self._combine(self.fine.marginal_x(x, points), self.coarse.marginal_x(x, points))
+
+    def marginal_y(self, y, points: int = 801):
+        """p(y)."""
+        return self._combine(self.fine.marginal_y(y, points), self.coarse.marginal_y(y, points))
+
+    def metadata(self) -> dict:
+        """The fine grid's metadata with the extrapolated statistics."""
+        return {**self.fine.metadata(), "mean_energy": float(self.mean_energy), "mean_x2": float(self.mean_x2),
+                "prob_below_barrier": float(self.prob_below_barrier), "impact_rate": float(self.impact_rate),
+                "extrapolated_from": [self.fine.metadata()["grid"], self.coarse.metadata()["grid"]]}
+
+
+class ExtrapolatedPeriodicDensity(PeriodicDensity):
+    """:class:`PeriodicDensity` of two solves on grids a factor 2 apart, combined by Richardson extrapolation.
+
+    Built by :func:`periodic_density_xy` with ``extrapolate=True``. Its sections (:meth:`section`) and ``mean`` are
+    :class:`ExtrapolatedSection`; ``fine`` and ``coarse`` are the two solves. On example 08 the L1 of p(H | t)
+    against Monte Carlo falls from 0.024 to 0.009 (D = 0.02) and from 0.009 to 0.005 (D = 0.05) at the default grid,
+    for 1.3 times the time (docs/results/fpk-forced.md).
+    """
+
+    def __init__(self, fine: PeriodicDensity, coarse: PeriodicDensity):
+        self.fine, self.coarse = fine, coarse
+        self.model, self.grid, self.period, self.times = fine.model, fine.grid, fine.period, fine.times
+        self.h_max = fine.h_max
+        self.mean = ExtrapolatedSection(fine.mean, coarse.mean)
+        self.mean_energy_t = ExtrapolatedSection._combine(fine.mean_energy_t, coarse.mean_energy_t)
+        self.impact_rate_t = ExtrapolatedSection._combine(fine.impact_rate_t, coarse.impact_rate_t)
+        self.mean_energy = float(self.mean_energy_t.mean())
+        self.impact_rate = float(self.impact_rate_t.mean())
+        self.periodicity = max(fine.periodicity, coarse.periodicity)
+        self.conservation = max(fine.conservation, coarse.conservation)
+        self.iterations = fine.iterations + coarse.iterations
+        self.factors = fine.factors + coarse.factors
+        self.timing = {k: fine.timing[k] + coarse.timing[k] for k in fine.timing}
+
+    def cells_at(self, t):
+        raise ParameterError("an extrapolated density has no cells of its own: use .fine.cells_at or .section(t)")
+
+    def section(self, t) -> ExtrapolatedSection:
+        """The extrapolated density at time ``t`` of the period (mod T)."""
+        return ExtrapolatedSection(self.fine.section(t), self.coarse.section(t))
+
+    def mean_energy_at(self, t):
+        """E[H | t] at times ``t`` (mod T)."""
+        return ExtrapolatedSection._combine(self.fine.mean_energy_at(t), self.coarse.mean_energy_at(t))
+
+    def impact_rate_at(self, t):
+        """The impact rate at times ``t`` (mod T)."""
+        return ExtrapolatedSection._combine(self.fine.impact_rate_at(t), self.coarse.impact_rate_at(t))
+
+    def __repr__(self) -> str:
+        return "Extrapolated" + super().__repr__()
+
+
 def _count(name, value) -> int:
     if isinstance(value, bool) or int(value) != value or value < 1:
         raise ParameterError(f"{name}={value!r} must be a whole number >= 1")
@@ -284,7 +379,7 @@ def unforced(model):
 def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: int = DEFAULT_STEPS,
                         phases: int | None = None, walls="model", restitution=None, points: int = 2000,
                         tol: float = 1e-10, max_iterations: int = 300,
-                        scheme: str = "cn") -> PeriodicDensity:
+                        scheme: str = "cn", extrapolate: bool = False) -> PeriodicDensity:
     """Periodic density p(x, y, t) of a periodically forced ``model`` with impact boundary conditions.
 
     Parameters
@@ -308,10 +403,13 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
         Most period maps GMRES may apply.
     scheme : {'cn', 'bdf2'}
         Crank-Nicolson (default, the smaller error) or BDF2 (L-stable: no undamped stiff modes).
+    extrapolate : bool
+        Also solve on the grid twice coarser and combine the two (Richardson, second order): an
+        :class:`ExtrapolatedPeriodicDensity`, about 2.5 times more accurate for 1.3 times the time.
 
     Returns
     -------
-    PeriodicDensity
+    PeriodicDensity or ExtrapolatedPeriodicDensity
 
     Raises
     ------
@@ -481,6 +579,9 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
     if tail > 1e-4:
         warnings.warn(f"{tail:.2g} of the time-averaged probability lies in the top 10% of [0, h_max={h_max:g}]: "
                       "raise h_max", GridWarning, stacklevel=2)
+    if extrapolate:
+        n_e, n_p = max(8, n_e // 2), max(16, n_p // 2)
+        return ExtrapolatedPeriodicDensity(out, solve_on(h))
     return out
 
 

@@ -46,6 +46,9 @@ def register(subparsers) -> None:
     p.add_argument("--steps", type=int, default=64,
                    help="--method fpk, forced models: BDF2 time steps per forcing period (rounded up to a multiple of "
                         "--phases); cost ~ steps")
+    p.add_argument("--extrapolate", action="store_true",
+                   help="--method fpk, forced models: also solve on the grid twice coarser and combine the two "
+                        "(Richardson): ~2.5x smaller error for ~1.3x the time")
     p.add_argument("--bins", type=int, default=400, help="--phases: bins of H on [0, h-max], as vibro mc")
     p.add_argument("--xy-bins", type=int, nargs=2, default=(80, 80), metavar=("NX", "NY"),
                    help="--phases: bins of x and y, as vibro mc")
@@ -137,7 +140,7 @@ def _run_forced(args, model, plan) -> int:
         plan.file(_phases_path(args), "--phases-out")
     grid = _grid(args, FORCED_GRID)
     sol = periodic_density_xy(model, grid=grid, h_max=args.h_max, steps=args.steps, phases=args.phases or None,
-                              points=args.points)
+                              points=args.points, extrapolate=args.extrapolate)
     sd = sol.mean
     _check_resolved(args, sd)
     if args.joint is not None:
@@ -181,7 +184,8 @@ def _run_forced(args, model, plan) -> int:
         results["phase_impact_rate"] = [{"t_phase": float(t), "value": float(v)}
                                         for t, v in zip(times, sol.impact_rate_at(times))]
     settings = {"method": "fpk", "h_max": args.h_max, "points": args.points, "grid": list(grid),
-                "steps": len(sol.times), "period": sol.period, "forcing": str(model.forcing), "phases": args.phases}
+                "steps": len(sol.times), "period": sol.period, "forcing": str(model.forcing), "phases": args.phases,
+                "extrapolate": args.extrapolate}
     rec = record("pdf", model=model, settings=settings, results=results, started=started)
     write_sidecar(args.out, rec)
     if args.joint is not None:
