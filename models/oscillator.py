@@ -663,8 +663,10 @@ class ImpactOscillator:
         """
         if self.is_forced:
             raise ModelError(f"{what} need a model without time dependence, but this one is forced by F = "
-                             f"{self.forcing}; use Monte Carlo (vibro mc, hybrid.stochastic.simulate_automaton("
-                             "model.to_automaton(), ...)) or orbits (vibro orbit, simulate_orbit)")
+                             f"{self.forcing}; for its periodic density use vibro pdf --method fpk --phases N "
+                             "(averaging.phase_plane.periodic_density_xy), Monte Carlo (vibro mc, "
+                             "hybrid.stochastic.simulate_automaton(model.to_automaton(), ...)) or orbits (vibro orbit, "
+                             "simulate_orbit)")
 
     # ------------------------------------------------------------------ automaton
     def to_automaton(self) -> HybridAutomaton:

@@ -37,6 +37,9 @@ tangent to one family of cell faces:
 * The stationary vector is the null vector of the sparse operator, computed by one sparse LU solve (minimum
   degree ordering of A + A^T) with one equation replaced by the normalisation (implied by conservation).
 
+A periodically forced model has a periodic density instead: :func:`periodic_density_xy` (module
+:mod:`averaging.phase_plane.forced`) finds it as the fixed point of the period map of this operator.
+
 Errors (``benchmarks/fpk_convergence.py``, both grid directions refined together): fitted order 2.15 for p(H)
 on the exact elastic density, 1.75 on Fig. 2 (Ma, delta = 1); 1.3 for E[H] with a wall at the equilibrium
 (the wall meets the equilibrium at a corner of the domain). The outer ring at ``h_max`` is reflecting: choose
@@ -59,6 +62,7 @@ Examples
 
 from __future__ import annotations
 
+from .forced import PeriodicDensity, periodic_density_xy
 from .passage import Domain, FirstPassage, PassageWarning, crossing_rate, first_passage_fpk
 from .solver import DEFAULT_GRID, GridWarning, PhaseDensity, solve_phase_plane, stationary_density_xy
 from .spectrum import Spectrum, spectrum_fpk
@@ -66,6 +70,6 @@ from .spectrum import Spectrum, spectrum_fpk
 METHOD = "fpk"
 """Name of this method family (beside the averaging methods ``paper``, ``exact-two-impact``, ``jump``)."""
 
-__all__ = ["DEFAULT_GRID", "METHOD", "Domain", "FirstPassage", "GridWarning", "PassageWarning", "PhaseDensity",
-           "Spectrum", "crossing_rate", "first_passage_fpk", "solve_phase_plane", "spectrum_fpk",
-           "stationary_density_xy"]
+__all__ = ["DEFAULT_GRID", "METHOD", "Domain", "FirstPassage", "GridWarning", "PassageWarning", "PeriodicDensity",
+           "PhaseDensity", "Spectrum", "crossing_rate", "first_passage_fpk", "periodic_density_xy", "solve_phase_plane",
+           "spectrum_fpk", "stationary_density_xy"]

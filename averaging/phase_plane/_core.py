@@ -230,59 +230,28 @@ class Discretisation:
         ca, cb, Hf, mid, length = grid.radial_faces()
         f = coef.at(Hf, mid)
         Ha, Hb = grid.H_c[ring[ca]], grid.H_c[ring[cb]]
-        h = Hb - Ha
         s2a = coef.at(Ha, mid)["s2"]
         s2b = coef.at(Hb, mid)["s2"]
+        self._radial_faces = (ca, cb, f, Hb - Ha, s2a, s2b, length / f["w"])
         y = f["y"]
-        beta = y * f["m"] - 0.5 * y * y * (s2b - s2a) / h
-        kappa = 0.5 * y * y * f["s2"]
         scale = length / f["w"]
-        pos = kappa > 1e-14 * np.maximum(np.abs(beta) * h, 1e-300)
-        kap = np.where(pos, kappa, 1.0)
-        Pe = np.where(pos, beta * h / kap, 0.0)
-        ka = np.where(pos, kap / h * _bernoulli(-Pe), np.maximum(beta, 0.0))
-        kb = np.where(pos, -kap / h * _bernoulli(Pe), np.minimum(beta, 0.0))
-        flux = sps.csr_matrix(
-            (np.concatenate([scale * ka, scale * kb]), (np.r_[np.arange(len(ca)), np.arange(len(ca))], np.r_[ca, cb])),
-            shape=(len(ca), n),
-        )
         mixed = -0.5 * y * f["u"] / (2.0 * Hf) * scale
         avg = 0.5 * (
             sps.csr_matrix((np.ones(len(ca)), (np.arange(len(ca)), ca)), shape=(len(ca), n))
             + sps.csr_matrix((np.ones(len(ca)), (np.arange(len(ca)), cb)), shape=(len(ca), n))
         )
-        flux = flux + sps.diags(mixed) @ avg @ Gpsi @ S2
-        self.radial = (ca, cb, flux)
+        mixed_radial = sps.diags(mixed) @ avg @ Gpsi @ S2
+        self.radial = (ca, cb, self._radial_drift(f["m"]) + mixed_radial)
 
         # ---- angular faces: upwind convection along the orbit, the rest central
         L, R, F, dist = grid.angular_faces()
         ri = ring[L]
         g = coef.at(grid.H_c[ri], F)
         q = g["u"] / (2.0 * g["H"])
-        a = -1.0 + q * g["m"] / g["w"]
-        up = np.where(a < 0, R, L)
         dH = grid.dH[ri]
         m_ang = len(L)
         ar = np.arange(m_ang)
-        if phase_order == 1:
-            conv = sps.csr_matrix((dH * a, (ar, up)), shape=(m_ang, n))
-        else:
-            prev, nxt, _, _ = grid.neighbours()
-            down = np.where(a < 0, L, R)
-            far = np.where(a < 0, nxt[R], prev[L])  # the cell upstream of the upwind cell
-            uniform = np.isclose(grid.width[up], grid.width[down]) & (far >= 0)
-            uniform &= np.isclose(grid.width[np.maximum(far, 0)], grid.width[up])
-            kap = 1.0 / 3.0
-            cu = np.where(uniform, 1.0 - 0.25 * (1 + kap) + 0.25 * (1 - kap), 1.0)
-            cd = np.where(uniform, 0.25 * (1 + kap), 0.0)
-            cf = np.where(uniform, -0.25 * (1 - kap), 0.0)
-            conv = sps.csr_matrix(
-                (
-                    np.r_[dH * a * cu, dH * a * cd, dH * a * cf],
-                    (np.r_[ar, ar, ar], np.r_[up, down, np.maximum(far, 0)]),
-                ),
-                shape=(m_ang, n),
-            )
+        self._angular_faces = (L, R, g, q, dH, phase_order, grid.neighbours()[:2])
         coef_d = dH * q / g["w"]
         diff_psi = sps.csr_matrix(
             (np.r_[-0.5 * q * coef_d / dist * s2c[R], 0.5 * q * coef_d / dist * s2c[L]], (np.r_[ar, ar], np.r_[R, L])),
@@ -293,8 +262,7 @@ class Discretisation:
             + sps.csr_matrix((np.ones(m_ang), (ar, R)), shape=(m_ang, n))
         )
         mixed2 = sps.diags(-0.5 * g["y"] * coef_d) @ avg2 @ GH @ S2
-        angular = conv + diff_psi + mixed2
-        self.angular = (L, R, angular)
+        self.angular = (L, R, self._angular_convection(g["m"]) + diff_psi + mixed2)
 
         # ---- divergence: +flux out of the lower/inner cell, -flux into the upper/outer cell
         def incidence(src, dst, m):
@@ -302,7 +270,11 @@ class Discretisation:
                 (np.r_[np.ones(m), -np.ones(m)], (np.r_[src, dst], np.r_[np.arange(m), np.arange(m)])), shape=(n, m)
             )
 
-        A = incidence(ca, cb, len(ca)) @ flux + incidence(L, R, m_ang) @ angular
+        self._incidence = (incidence(ca, cb, len(ca)), incidence(L, R, m_ang))
+        # the part of the operator that does not depend on the drift m (its mixed and angular diffusion terms, and
+        # the walls below): operator_with_drift adds the drift-dependent fluxes for another m
+        fixed = self._incidence[0] @ mixed_radial + self._incidence[1] @ (diff_psi + mixed2)
+        A = self._incidence[0] @ self.radial[2] + self._incidence[1] @ self.angular[2]
 
         # ---- walls: the flux p dH reaching the wall leaves the incoming cell and re-enters after the impact
         self.walls = {}
@@ -329,8 +301,63 @@ class Discretisation:
                     vals.append(-sgn * W1.T[jj1, kk1] * inv[kk1])
             self.walls[side] = (rings_in, cin, cout, W)
         if rows:
-            A = A + sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+            wall_map = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                      shape=(n, n))
+            A = A + wall_map
+            fixed = fixed + wall_map
+        self._fixed = fixed.tocsr()
         self.A = A.tocsc()
+
+    def _radial_drift(self, m):
+        """Scharfetter-Gummel fluxes across the ring faces for the drift values ``m`` at the faces."""
+        ca, cb, f, h, s2a, s2b, scale = self._radial_faces
+        n = self.grid.n
+        y = f["y"]
+        beta = y * m - 0.5 * y * y * (s2b - s2a) / h
+        kappa = 0.5 * y * y * f["s2"]
+        pos = kappa > 1e-14 * np.maximum(np.abs(beta) * h, 1e-300)
+        kap = np.where(pos, kappa, 1.0)
+        Pe = np.where(pos, beta * h / kap, 0.0)
+        ka = np.where(pos, kap / h * _bernoulli(-Pe), np.maximum(beta, 0.0))
+        kb = np.where(pos, -kap / h * _bernoulli(Pe), np.minimum(beta, 0.0))
+        rows = np.arange(len(ca))
+        return sps.csr_matrix((np.concatenate([scale * ka, scale * kb]), (np.r_[rows, rows], np.r_[ca, cb])),
+                              shape=(len(ca), n))
+
+    def _angular_convection(self, m):
+        """Convective fluxes along the rings (the free rotation plus the drift values ``m`` at the angular faces):
+        upwind, or upwind-biased third order (kappa = 1/3) where three cells of equal width line up."""
+        L, R, g, q, dH, phase_order, (prev, nxt) = self._angular_faces
+        grid, n = self.grid, self.grid.n
+        a = -1.0 + q * m / g["w"]
+        up = np.where(a < 0, R, L)
+        ar = np.arange(len(L))
+        if phase_order == 1:
+            return sps.csr_matrix((dH * a, (ar, up)), shape=(len(L), n))
+        down = np.where(a < 0, L, R)
+        far = np.where(a < 0, nxt[R], prev[L])  # the cell upstream of the upwind cell
+        uniform = np.isclose(grid.width[up], grid.width[down]) & (far >= 0)
+        uniform &= np.isclose(grid.width[np.maximum(far, 0)], grid.width[up])
+        kap = 1.0 / 3.0
+        cu = np.where(uniform, 1.0 - 0.25 * (1 + kap) + 0.25 * (1 - kap), 1.0)
+        cd = np.where(uniform, 0.25 * (1 + kap), 0.0)
+        cf = np.where(uniform, -0.25 * (1 - kap), 0.0)
+        return sps.csr_matrix(
+            (np.r_[dH * a * cu, dH * a * cd, dH * a * cf], (np.r_[ar, ar, ar], np.r_[up, down, np.maximum(far, 0)])),
+            shape=(len(L), n),
+        )
+
+    def drift_points(self):
+        """(x, y) of the radial and of the angular faces: where :meth:`operator_with_drift` needs the drift."""
+        f, g = self._radial_faces[2], self._angular_faces[2]
+        return (f["x"], f["y"]), (g["x"], g["y"])
+
+    def operator_with_drift(self, m_radial, m_angular):
+        """The operator (CSR) with the non-conservative drift replaced by ``m_radial`` / ``m_angular`` at the faces
+        (:meth:`drift_points`); the noise, the walls and the grid stay. Used for a time-dependent forcing."""
+        inc_r, inc_a = self._incidence
+        drift = inc_r @ self._radial_drift(m_radial) + inc_a @ self._angular_convection(m_angular)
+        return (self._fixed + drift).tocsr()
 
     def solve(self):
         """The normalised null vector: one equation replaced by total mass = 1 (implied by conservation)."""
