@@ -37,7 +37,7 @@ BAD = [
     (["orbit", "--model", "{tmp}/bad.py:Bad"], "raised RuntimeError: constructor failed"),
     (["orbit", "--model", "{tmp}/bad.py:Needs"], "cannot be built without arguments"),
     (["orbit", "--model", "{tmp}/missing.py:Bad"], "does not exist"),
-    (["orbit", "--model", "{tmp}/bad.py:Nothing"], "no ImpactOscillator subclass"),
+    (["orbit", "--model", "{tmp}/bad.py:Nothing"], "has no object named"),
 ]
 
 
