@@ -88,6 +88,10 @@ def estimate_against_exact(grids=GRIDS):
                       f"ratio {est / true:5.2f} ({dt:.2f} s with the estimate)", flush=True)
     bounded = sum(est >= true for *_, true, est in rows)
     print(f"estimate >= true error in {bounded} of {len(rows)} cases")
+    import json
+
+    (ROOT / "benchmarks" / "data" / "fpk_estimate.json").write_text(json.dumps(
+        [{"problem": n, "grid": list(g), "bins": b, "true": t, "estimate": e} for n, g, b, t, e in rows], indent=1))
     return rows
 
 

@@ -152,7 +152,7 @@ def write_page(rows):
             lines.append(f"| {r['case']} | {r['method']} | {r['estimate']:.2g} | {r['true']:.2g} | "
                          f"{r['ref_est']:.0e} | {r['cpu_s']:.2f} | {r['wall_s']:.2f} | {r['escalated'] or '-'} |")
         lines.append("")
-    lines += ratings_section()
+    lines += ratings_section() + fpk_estimate_section()
     PAGE.parent.mkdir(parents=True, exist_ok=True)
     PAGE.write_text("\n".join(lines) + "\n")
     print(f"wrote {PAGE}")
@@ -180,6 +180,26 @@ def ratings_section():
     f = m["fpk"]
     out += ["", f"fpk: predicted estimate at the default grid {f['floor']:.2g} ({f['source']}).", ""]
     return out
+
+
+def fpk_estimate_section():
+    """fpk's two-grid estimate against the true error on the problems with exact p(H) (benchmarks/fpk_convergence.py
+    --estimate-only writes the rows)."""
+    path = ROOT / "benchmarks" / "data" / "fpk_estimate.json"
+    if not path.exists():
+        return []
+    rows = json.loads(path.read_text())
+    out = ["## fpk's own estimate against exact answers", "",
+           "`benchmarks/fpk_convergence.py --estimate-only`: the two-grid estimate (Richardson against the grid twice "
+           "coarser at the lowest fitted order, 1.3) and the true L1 error of p(H) on two problems with exact "
+           "answers: elastic walls (the Gibbs density) and the linear oscillator with a stop at the equilibrium, "
+           "r = 1 (the folded Gaussian). "
+           f"The estimate bounds the true error in {sum(r['estimate'] >= r['true'] for r in rows)} of {len(rows)}.",
+           "", "| problem | grid | bins | true L1 | estimate | estimate / true |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r['problem']} | {tuple(r['grid'])} | {r['bins']} | {r['true']:.2e} | {r['estimate']:.2e} | "
+                   f"{r['estimate'] / r['true']:.1f} |")
+    return out + [""]
 
 
 def references_only():

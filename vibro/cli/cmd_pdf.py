@@ -41,8 +41,8 @@ def register(subparsers) -> None:
     )
     add_model_arguments(p)
     p.add_argument("--method", choices=("auto", *DENSITY_METHODS, "fpk"), default="auto",
-                   help="auto (default: the cheapest method whose estimated error meets --tol), exact, paper, "
-                        "exact-two-impact, jump, chain or fpk (see above)")
+                   help="auto (default: the cheapest method whose estimated error meets --tol, the exact formula "
+                        "included), paper, exact-two-impact, jump, chain or fpk (see above)")
     p.add_argument("--tol", type=float, default=PDF_TOL,
                    help=f"--method auto: target L1 distance of p(H) on 40 bins (default {PDF_TOL})")
     p.add_argument("--grid", type=int, nargs=2, default=(160, 192), metavar=("NH", "NPHI"),

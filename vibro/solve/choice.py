@@ -149,7 +149,7 @@ class Choice:
 
     def summary(self) -> str:
         """Human-readable lines: method, why, expected error and cost."""
-        err = "not measured for this geometry" if math.isnan(self.expected_error) else f"{self.expected_error:.3g}"
+        err = "not rated for this model" if math.isnan(self.expected_error) else f"{self.expected_error:.3g}"
         s = [f"method: {self.method}", f"why: {self.reason}",
              f"expected L1 error of p(H): {err}", f"expected cost: {self.expected_cost:.3g} s"]
         if self.settings:

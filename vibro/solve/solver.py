@@ -207,7 +207,7 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
                         f"bias constant x dt**{scheme_order(s['scheme']):g}", [("monte-carlo", dict(s), est)])
     attempts = []
     while True:
-        sd, estimated, source = _run_deterministic(model, choice, h_max, edges, points)
+        sd, estimated, source = _run_deterministic(model, choice, h_max, edges, points, warn=forced)
         attempts.append((choice.method, dict(choice.settings), estimated))
         if forced or estimated <= tol or time.perf_counter() - t0 > max_cost:
             break
@@ -256,8 +256,9 @@ def _escalate(choice: Choice, estimated: float, tol: float) -> Choice | None:
     return None
 
 
-def _run_deterministic(model, choice: Choice, h_max: float, edges, points: int):
-    """(density, estimated L1 error on ``edges``, how it was estimated) of the chosen deterministic method."""
+def _run_deterministic(model, choice: Choice, h_max: float, edges, points: int, warn: bool = False):
+    """(density, estimated L1 error on ``edges``, how it was estimated) of the chosen deterministic method; ``warn``:
+    a forced averaging method outside its validity warns (an automatic choice escalates instead)."""
     from averaging import stationary_density
     from models import Elastic
 
@@ -286,7 +287,8 @@ def _run_deterministic(model, choice: Choice, h_max: float, edges, points: int):
         from .choice import averaging_cross_check
 
         chain_err = predict_averaging_error("chain", choice.diagnostics)
-        cross = averaging_cross_check(model, sd, choice.expected_error, warn=False)
+        cross = averaging_cross_check(model, sd, choice.expected_error, warn=warn,
+                                      remedy="use method fpk (or vibro pdf --method chain)")
         if cross is not None and not cross.valid:
             floor = cross.l1 - (chain_err if math.isfinite(chain_err) else 0.0)
             if not floor <= estimated:
