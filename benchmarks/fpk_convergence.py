@@ -8,9 +8,10 @@
 
 Both grid directions are refined together: (rings, angles) = (40, 48) * 2**k.
 
-4. The a-posteriori estimate (``PhaseDensity.estimate_error``: two grids, Richardson at the lowest fitted order
-   ``ESTIMATE_ORDER``) against the true L1 error on the two problems with exact p(H): elastic walls (Gibbs) and the
-   linear oscillator with a stop at the equilibrium, r = 1 (the folded Gaussian), on 100 and 40 bins.
+4. The a-posteriori estimate (``PhaseDensity.estimate_error``: three grids, Richardson at the observed order capped
+   at the lowest fitted ``ESTIMATE_ORDER``) against the true L1 error on the two problems with exact p(H): elastic
+   walls (Gibbs) and the linear oscillator with a stop at the equilibrium, r = 1 (the folded Gaussian), on 100 and
+   40 bins.
 
 Run: ``python benchmarks/fpk_convergence.py [--estimate-only]``.
 """

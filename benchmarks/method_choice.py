@@ -7,8 +7,8 @@ geometries of ``benchmarks/example_models.py`` (asymmetric gap, one-sided stop, 
 * **run**: ``python -m vibro solve ... --out FILE.csv`` as a subprocess (start-up included), wall time measured
   around it; the chosen method and the estimate after the run are read from its output.
 * **true L1**: on the 40 bins of [0, h_max] that ``solve`` uses (h_max from ``diagnose``), against a converged
-  reference: ``fpk`` on the grid (240, 288), whose own two-grid estimate (Richardson against (120, 144) at the
-  lowest fitted order) is printed beside it (cached in ``benchmarks/data/method_choice_refs.npz``).
+  reference: ``fpk`` on the grid (240, 288) ((320, 384) for the stop at the equilibrium), whose own three-grid
+  estimate is printed beside it (cached in ``benchmarks/data/method_choice_refs.npz``).
 
 Writes the tables to ``docs/results/method-choice.md``.
 Run: ``nice -n 10 python benchmarks/method_choice.py [--references]`` (``--references``: only the cached
@@ -35,6 +35,7 @@ sys.path.insert(0, str(ROOT))
 REFS = ROOT / "benchmarks" / "data" / "method_choice_refs.npz"
 PAGE = ROOT / "docs" / "results" / "method-choice.md"
 REF_GRID = (240, 288)
+REF_GRIDS = {"EquilibriumStop": (320, 384)}  # converges at order 0.5-0.75 (the inelastic stop at the equilibrium)
 TOLS = (0.02, 0.005)
 EXAMPLES = (("asymmetric gap (ex. 09)", "AsymmetricGap"), ("one-sided stop", "OneSidedStop"),
             ("stop at the equilibrium, r = 0.6 (ex. 06)", "EquilibriumStop"))
@@ -68,7 +69,7 @@ def reference(key, model, h_max, edges):
     if tag + "_m" not in store:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            sd = stationary_density_xy(model, grid=REF_GRID, h_max=h_max, tol=2.0)
+            sd = stationary_density_xy(model, grid=REF_GRIDS.get(key, REF_GRID), h_max=h_max, tol=2.0)
         store[tag + "_m"] = sd.bin_masses(edges)
         store[tag + "_est"] = np.array([sd.estimate_error(edges)])
         REFS.parent.mkdir(parents=True, exist_ok=True)
@@ -130,11 +131,11 @@ def write_page(rows):
              "TOL --out FILE.csv` ran as a subprocess (Python start-up and imports included) on the shared "
              "2-core machine. With 5 other workers beside it the load average was 6-11, so the wall time is "
              "inflated several-fold; the CPU time (user + system of the subprocess) is what one idle core "
-             "would take. The estimate is the one `solve` reports after its run (fpk: its two-grid Richardson "
+             "would take. The estimate is the one `solve` reports after its run (fpk: its three-grid Richardson "
              "estimate; paper, jump, chain: their rating against fpk over the sweep of "
              "`benchmarks/method_ratings.py`). The true L1 is on the 40 bins of [0, h_max] that `solve` uses, "
-             f"against `fpk` on the grid {REF_GRID}; that reference's own two-grid estimate is the column `ref`: "
-             "the true L1 is known to within it.", ""]
+             f"against `fpk` on the grid {REF_GRID} ((320, 384) for the stop at the equilibrium); that reference's "
+             "own three-grid estimate is the column `ref`: the true L1 is known to within it.", ""]
     for tol in TOLS:
         sel = [r for r in rows if r["tol"] == tol]
         within = sum(r["true"] <= tol for r in sel)
@@ -183,15 +184,16 @@ def ratings_section():
 
 
 def fpk_estimate_section():
-    """fpk's two-grid estimate against the true error on the problems with exact p(H) (benchmarks/fpk_convergence.py
+    """fpk's three-grid estimate against the true error on the problems with exact p(H) (benchmarks/fpk_convergence.py
     --estimate-only writes the rows)."""
     path = ROOT / "benchmarks" / "data" / "fpk_estimate.json"
     if not path.exists():
         return []
     rows = json.loads(path.read_text())
     out = ["## fpk's own estimate against exact answers", "",
-           "`benchmarks/fpk_convergence.py --estimate-only`: the two-grid estimate (Richardson against the grid twice "
-           "coarser at the lowest fitted order, 1.3) and the true L1 error of p(H) on two problems with exact "
+           "`benchmarks/fpk_convergence.py --estimate-only`: the three-grid estimate (Richardson against the grid "
+           "twice coarser at the order observed against the grid four times coarser, at most 1.3) and the true L1 "
+           "error of p(H) on two problems with exact "
            "answers: elastic walls (the Gibbs density) and the linear oscillator with a stop at the equilibrium, "
            "r = 1 (the folded Gaussian). "
            f"The estimate bounds the true error in {sum(r['estimate'] >= r['true'] for r in rows)} of {len(rows)}.",

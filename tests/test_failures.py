@@ -153,10 +153,13 @@ def test_heavy_damping_with_elastic_walls_still_gets_the_exact_formula():
 
 
 def test_monte_carlo_over_budget_warns_that_the_tolerance_is_not_reached():
+    # Monte Carlo's plan (choose no longer takes it where fpk applies: planned directly, as for a forced run)
+    from vibro.solve.choice import mc_choice
+
     m = DuffingImpact(restitution=Ma(0.2), c=0.3, D=0.15, delta=0.7)
     with pytest.warns(UserWarning, match="capped"):
-        ch = choose(m, tol=1e-4, max_cost=0.01, mc_pilot=False)
-    assert ch.expected_error > 1e-4
+        ch = mc_choice(m, 1e-4, diagnose(m), "forced", {}, 0.01, False, 1)
+    assert ch.method == "monte-carlo" and ch.expected_error > 1e-4
 
 
 # regression: found by the validity map (L1 1.6 from Monte Carlo at V_C = 0.1); fixed in averaging by f9816f4

@@ -159,7 +159,7 @@ def test_solve_refines_the_fpk_grid_when_its_estimate_misses(monkeypatch):
     tol = 0.0015
     sol = solve(m, tol=tol, method="auto")
     assert sol.method == "fpk" and sol.attempts[0][1]["grid"] == choice_mod.FPK_GRIDS[0]
-    assert sol.estimated_error <= tol and "two grids" in sol.estimate_source
+    assert sol.estimated_error <= tol and "three grids" in sol.estimate_source
     assert len(sol.attempts) >= 2 and sol.attempts[0][2] > tol and "escalated" in sol.summary()
 
 

@@ -34,7 +34,7 @@ def register(subparsers) -> None:
                     "exact-two-impact (the same with the exact loss of two impacts per cycle); jump (impacts as "
                     "Poisson-timed jumps of the averaged energy); chain (the jumps once per flight, T(H)/walls: about "
                     "0.1 s); fpk (the full (x, y) Fokker-Planck equation with impacts as boundary conditions, on an "
-                    "energy-angle grid, with a two-grid error estimate: 0.1-1 s). paper, jump and chain carry a "
+                    "energy-angle grid, with a three-grid error estimate: 0.1-1 s). paper, jump and chain carry a "
                     "rating of their error measured against fpk over a sweep of models (benchmarks/method_ratings.py)"
                     "; where none covers the model and it is self-excited or strongly dissipative, they are refused "
                     "unless --force is given.",

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
                     "flight; milliseconds to 0.1 s), each with a rating of its L1 error measured against the phase-"
                     "plane solver over a sweep of models (benchmarks/method_ratings.py; not rated outside it); fpk "
                     "(the full (x, y) Fokker-Planck equation with impacts as boundary conditions, 0.1-2 s, on the "
-                    "coarsest grid predicted to meet --tol, with its own two-grid error estimate); Monte Carlo only "
+                    "coarsest grid predicted to meet --tol, with its own three-grid error estimate); Monte Carlo only "
                     "where none of these applies (forced or multi-well models; dt and paths planned from the "
                     "scheme's bias constant and a pilot run). Runs the cheapest one predicted to meet --tol, then "
                     "reports the error estimated after the run and how it was made; when that misses --tol it "

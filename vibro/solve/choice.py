@@ -10,7 +10,7 @@
    family: symmetric, asymmetric, one-sided, equilibrium; self-excited damping included). A method is a candidate
    where a rating covers the model (:func:`~vibro.solve.errormodel.rating`), and chosen when its rating meets tol.
 3. **fpk**, the phase-plane solver of the full (x, y) problem, on the coarsest grid of :data:`FPK_GRIDS` predicted
-   to meet tol; it carries its own a-posteriori estimate (two grids), so it is the method for models no rating
+   to meet tol; it carries its own a-posteriori estimate (three grids), so it is the method for models no rating
    covers, and :func:`~vibro.solve.solve` refines its grid when the estimate misses.
 4. **Monte Carlo** only where no deterministic method applies (a forced or multi-well model), planned by
    :mod:`vibro.solve.planner`.
@@ -279,7 +279,7 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     grid = fpk_grid_for(tol)
     preds["fpk"] = fpk_typical() * (160.0 / grid[0]) ** FPK_PREDICT_ORDER
     why = "; ".join(reasons) + (f"; the phase-plane FPK solver (impacts as boundary conditions) on grid {grid} "
-                                "carries its own two-grid error estimate")
+                                "carries its own three-grid error estimate")
     return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
 
 

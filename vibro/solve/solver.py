@@ -32,7 +32,7 @@ class Solution:
     wall_time : float
         Seconds spent computing the density (diagnostics included).
     estimated_error : float
-        The L1 error estimated after the run: for fpk its two-grid (Richardson) estimate on the ``L1_BINS`` bins;
+        The L1 error estimated after the run: for fpk its three-grid (Richardson) estimate on the ``L1_BINS`` bins;
         for Monte Carlo the statistical error measured from two independent halves plus the bias model; for
         averaging its rating against fpk (raised when the a-posteriori check against the chain disagrees).
     result : object
