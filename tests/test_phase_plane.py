@@ -198,7 +198,8 @@ def _exact_problems():
 @pytest.mark.parametrize("grid", [(40, 48), (60, 72), (80, 96)])
 def test_error_estimate_bounds_the_true_error(grid):
     # the three-grid estimate (observed order, at most the lowest fitted) bounds the true L1 error on the problems
-    # with exact answers, on the 100 bins of error_estimate and on the 40 of vibro solve, and is not loose (within a factor 10)
+    # with exact answers, on the 100 bins of error_estimate and on the 40 of vibro solve, and is not loose (within a
+    # factor 10)
     for name, model, h_max, kw, cdf in _exact_problems():
         sd = stationary_density_xy(model, grid=grid, h_max=h_max, tol=1.0, **kw)  # tol: no GridWarning
         assert "three grids" in sd.error_method
