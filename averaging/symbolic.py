@@ -96,6 +96,10 @@ class AveragingEquations:
         self._w_diffusion = sp.expand(S**2 * (sig2.xreplace(plus) + sig2.xreplace(minus)))
         self.drift_integrand = sp.expand(self._w_drift / S)
         self.diffusion_integrand = sp.expand(self._w_diffusion / S)
+        # compiled kernels, shared by every copy that averaging_equations makes for other parameter values (they take
+        # the parameters as arguments): a per-copy cache recompiled them for each model object, 1462 lambdify calls
+        # (4.7 s of CPU) in one diagnose of Fig. 14, whose search builds a new elastic model per energy range
+        self._compiled = {}
 
     # ------------------------------------------------------------------ display
     @cached_property
@@ -187,9 +191,14 @@ class AveragingEquations:
         return f"AveragingEquations({self.model.name!r})"
 
     # ------------------------------------------------------------------ compile
-    @cached_property
+    @property
     def kernels(self) -> _Kernels:
-        """numpy kernels of s*a and s*b as functions of (x, s, *parameter values)."""
+        """numpy kernels of s*a and s*b as functions of (x, s, *parameter values) (compiled once per declaration)."""
+        if "kernels" not in self._compiled:
+            self._compiled["kernels"] = self._compile_kernels()
+        return self._compiled["kernels"]
+
+    def _compile_kernels(self) -> _Kernels:
         names = tuple(self.model.params)
         syms = [self.model.parameter_symbols[k] for k in names]
         args = [X, S, *syms]
@@ -198,9 +207,15 @@ class AveragingEquations:
         diffusion = sp.lambdify(args, self._w_diffusion, modules="numpy", dummify=True)
         return _Kernels(drift, diffusion, names)
 
-    @cached_property
+    @property
     def potential_kernels(self):
-        """(G, g) as numpy functions of (x, *parameter values); None when G has no closed form."""
+        """(G, g) as numpy functions of (x, *parameter values); None when G has no closed form (compiled once per
+        declaration)."""
+        if "potential" not in self._compiled:
+            self._compiled["potential"] = self._compile_potential()
+        return self._compiled["potential"]
+
+    def _compile_potential(self):
         G = self.model.potential_expr
         if G is None:
             return None

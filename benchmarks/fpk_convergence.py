@@ -7,7 +7,13 @@
 3. The equilibrium wall (linear, c = D = 0.05, Newton r = 0.6): successive differences of E[H].
 
 Both grid directions are refined together: (rings, angles) = (40, 48) * 2**k.
-Run: ``python benchmarks/fpk_convergence.py``.
+
+4. The a-posteriori estimate (``PhaseDensity.estimate_error``: three grids, Richardson at the observed order capped
+   at the lowest fitted ``ESTIMATE_ORDER``) against the true L1 error on the two problems with exact p(H): elastic
+   walls (Gibbs) and the linear oscillator with a stop at the equilibrium, r = 1 (the folded Gaussian), on 100 and
+   40 bins.
+
+Run: ``python benchmarks/fpk_convergence.py [--estimate-only]``.
 """
 
 from __future__ import annotations
@@ -58,7 +64,43 @@ def successive(quantity, grids=GRIDS, label=""):
     return vals, diffs, fitted_order(1.0 / np.array([g[0] for g in grids[:-1]]), diffs)
 
 
+def estimate_against_exact(grids=GRIDS):
+    """Rows (problem, grid, bins, true L1, estimated L1) on the exact problems of tests/test_phase_plane.py."""
+    import warnings
+
+    from test_phase_plane import _exact_problems
+
+    from averaging.phase_plane import stationary_density_xy
+
+    rows = []
+    for name, model, h_max, kw, cdf in _exact_problems():
+        for g in grids:
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                sd = stationary_density_xy(model, grid=g, h_max=h_max, **kw)
+            dt = time.perf_counter() - t0
+            for bins in (100, 40):
+                edges = np.linspace(0.0, h_max, bins + 1)
+                true = float(np.abs(sd.bin_masses(edges) - np.diff(cdf(edges))).sum())
+                est = sd.estimate_error(edges)
+                rows.append((name, g, bins, true, est))
+                print(f"  {name:48s} {str(g):11s} {bins:4d} bins: true {true:.2e} estimate {est:.2e} "
+                      f"ratio {est / true:5.2f} ({dt:.2f} s with the estimate)", flush=True)
+    bounded = sum(est >= true for *_, true, est in rows)
+    print(f"estimate >= true error in {bounded} of {len(rows)} cases")
+    import json
+
+    (ROOT / "benchmarks" / "data" / "fpk_estimate.json").write_text(json.dumps(
+        [{"problem": n, "grid": list(g), "bins": b, "true": t, "estimate": e} for n, g, b, t, e in rows], indent=1))
+    return rows
+
+
 def main():
+    if "--estimate-only" in sys.argv:
+        estimate_against_exact()
+        return
+    estimate_against_exact()
     errs, order = elastic()
     print(f"elastic density: L1 {', '.join(f'{e:.2e}' for e in errs)}; fitted order {order:.2f}")
     from vibro.studies.figures.specs import FIGURES

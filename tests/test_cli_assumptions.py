@@ -57,8 +57,8 @@ def test_noise_assumption_counts_noises_and_states_and_names_the_convention():
 
 def test_pdf_prints_and_records_the_stratonovich_reading_of_multiplicative_noise(tmp_path, capsys, model_file):
     out = tmp_path / "p.csv"
-    assert main(["pdf", "--model", f"{model_file}:Multiplicative", "--out", str(out), "--points", "300",
-                 "--force"]) == 0
+    assert main(["pdf", "--model", f"{model_file}:Multiplicative", "--method", "jump", "--out", str(out),
+                 "--points", "300", "--force"]) == 0
     text = capsys.readouterr().out
     assert "noise: 1 noise, 2 states, Stratonovich (multiplicative: f depends on x)" in text
     rec = json.loads(out.with_suffix(".json").read_text())

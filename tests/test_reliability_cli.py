@@ -67,7 +67,7 @@ def test_bad_argument_exits_2_with_one_line(argv, words, tmp, capsys):
 
 
 def test_h_max_that_cuts_the_mass_is_one_warning_line(tmp, capsys):
-    rc = main(["pdf", "--out", str(tmp / "p.csv"), "--h-max", "1e-9", "--points", "101"])
+    rc = main(["pdf", "--method", "jump", "--out", str(tmp / "p.csv"), "--h-max", "1e-9", "--points", "101"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 0
     assert len(err) == 1 and err[0].startswith("vibro pdf: warning: h_max=1e-09 cuts off 1 of the")

@@ -25,6 +25,13 @@ SECONDS_PER_CELL = 8e-5
 """Solve time per cell (measured 85-165 us on 2 shared cores), for the estimate in the refusal."""
 L1_BINS = 100
 DEFAULT_STRETCH = 0.4
+ESTIMATE_ORDER = 1.3
+"""Highest order the a-posteriori error estimate L1(p_h, p_2h) / (2**p - 1) assumes: the lowest order fitted in
+``benchmarks/fpk_convergence.py`` (E[H] with a wall at the equilibrium; p(H) converges at 1.4-2.2 elsewhere). The
+order observed on three grids (h, 2h, 4h) is taken where it is lower: with an inelastic stop at the equilibrium the
+40-bin L1 converges at order 0.5-0.75 on grids up to (256, 320) (successive differences 5.7e-3, 4.0e-3, 2.4e-3)."""
+MIN_ORDER = 0.25
+"""Lowest order the estimate assumes (an observed order below it: not yet converging, estimate 5.3 L1(p_h, p_2h))."""
 
 
 class GridWarning(UserWarning):
@@ -55,7 +62,9 @@ class PhaseDensity:
     conservation : float
         max |column sum| of the discrete operator (0 up to round-off: probability is conserved).
     error_estimate : float or None
-        Estimated L1 error of p(H) on 100 bins (from a solve on a grid twice coarser), when checked.
+        Estimated L1 error of p(H) on 100 bins of [0, h_support], when checked (see :meth:`estimate_error`).
+    error_method : str or None
+        How ``error_estimate`` was made (three grids, the observed order, the tail term).
     timing : dict
         Seconds spent assembling and solving.
     """
@@ -97,6 +106,9 @@ class PhaseDensity:
             self._impacts[side] = (np.sqrt(2.0 * (grid.H_c[rings] - Hw)), flux, grid.dH[rings])
         self.impact_rate = float(sum(self.impact_rates.values()))
         self.error_estimate = None
+        self.error_method = None
+        self._coarse = None  # the solves on grids twice and four times coarser, kept for estimate_error on any bins
+        self._tail = 0.0
         self.H = np.array([])
         self.p = np.array([])
 
@@ -127,6 +139,40 @@ class PhaseDensity:
         """
         edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_support)
         return np.diff(self._cdf(edges))
+
+    def estimate_error(self, edges=None, order: float = ESTIMATE_ORDER) -> float:
+        """A-posteriori L1 error of p(H) on the bins ``edges`` (default 100 bins of [0, h_support]).
+
+        Three grids: with d1 = L1(p_h, p_2h) and d2 = L1(p_2h, p_4h) from the solves on grids twice and four times
+        coarser in both directions (kept from the check), the observed order is log2(d2 / d1); Richardson's
+        estimate of the fine grid's error is d1 / (2**p - 1) with p the observed order, but at most ``order`` (the
+        lowest the convergence study fitted, :data:`ESTIMATE_ORDER`) and at least :data:`MIN_ORDER`. Added: the
+        probability in the top 10 % of the range (the reflecting top at h_max moves at most that much; the model
+        itself is solved without approximation).
+
+        Returns NaN when the density was computed without the check (no coarse solves to compare with).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact, Ma
+        >>> sd = stationary_density_xy(DuffingImpact(restitution=Ma(0.4)), grid=(40, 48))
+        >>> 0 < sd.estimate_error(np.linspace(0.0, 4.0, 41)) < 0.05
+        True
+        """
+        if self._coarse is None:
+            return float("nan")
+        if edges is None:
+            edges = np.linspace(0.0, self.h_support, L1_BINS + 1)
+        half, quarter = self._coarse
+        d1 = float(np.abs(self.bin_masses(edges) - half.bin_masses(edges)).sum())
+        p = order
+        if quarter is not None:
+            d2 = float(np.abs(half.bin_masses(edges) - quarter.bin_masses(edges)).sum())
+            if d1 > 0 and d2 > 0:
+                p = min(order, max(MIN_ORDER, float(np.log2(d2 / d1))))
+            elif d1 > 0:
+                p = MIN_ORDER
+        return d1 / (2.0**p - 1.0) + self._tail
 
     # ------------------------------------------------------------------ impacts
     def impact_speed_density(self, side: str = "right"):
@@ -228,6 +274,7 @@ class PhaseDensity:
             "walls": list(self.walls), "mean_energy": self.mean_energy, "mean_x2": self.mean_x2,
             "prob_below_barrier": self.prob_below_barrier, "impact_rate": self.impact_rate,
             "residual": self.residual, "conservation": self.conservation, "error_estimate": self.error_estimate,
+            "error_method": self.error_method,
         }
 
     def __repr__(self) -> str:
@@ -374,11 +421,6 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
     return out
 
 
-def _l1_bins(a: PhaseDensity, b: PhaseDensity, bins: int = L1_BINS) -> float:
-    edges = np.linspace(0.0, a.h_support, bins + 1)
-    return float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
-
-
 FIT_TAIL = 1e-8
 """The ring mass left above the range :func:`stationary_density_xy` fits to the density (see ``h_max`` there)."""
 
@@ -412,7 +454,7 @@ def _mass_energy(sd: PhaseDensity) -> float:
 
 def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls="model", restitution=None,
                           points: int = 2000, check: bool = True, tol: float = 0.005,
-                          order: float = 2.0) -> PhaseDensity:
+                          order: float = ESTIMATE_ORDER) -> PhaseDensity:
     """Stationary density p(x, y) of ``model`` with impact boundary conditions, and p(H), marginals, impacts.
 
     Parameters
@@ -429,10 +471,14 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     walls, restitution, points
         See :func:`solve_phase_plane`.
     check : bool
-        Check confinement and estimate the discretisation error of p(H) (L1 on 100 bins) from a second solve
-        on a grid twice coarser (Richardson, ``order``); warn with :class:`GridWarning` when it exceeds ``tol``.
+        Check confinement and estimate the error of p(H) (L1 on 100 bins, ``error_estimate``; on other bins by
+        :meth:`PhaseDensity.estimate_error`) from solves on grids twice and four times coarser (Richardson at the
+        observed order, at most ``order``; about 30 % of the cost of the first); warn with :class:`GridWarning` when
+        it exceeds ``tol``.
     tol : float
         Target L1 error of p(H) on 100 bins for the grid check.
+    order : float
+        Convergence order assumed by the estimate (default :data:`ESTIMATE_ORDER`, the lowest fitted one).
 
     Returns
     -------
@@ -487,9 +533,19 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     if tail > 1e-4:
         warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of [0, h_max={h_max:g}]: raise h_max",
                       GridWarning, stacklevel=2)
-    coarse = solve_phase_plane(model, (max(8, grid[0] // 2), max(16, grid[1] // 2)), h, walls, restitution, 3)
-    est = _l1_bins(sd, coarse) / (2.0**order - 1.0)
+    coarse_grid = (max(8, grid[0] // 2), max(16, grid[1] // 2))
+    quarter_grid = (max(8, grid[0] // 4), max(16, grid[1] // 4))
+    half = solve_phase_plane(model, coarse_grid, h, walls, restitution, 3)
+    # the third grid costs 1/16 of the first: the observed order (the estimate is safe where convergence is slow)
+    quarter = solve_phase_plane(model, quarter_grid, h, walls, restitution, 3) if quarter_grid != coarse_grid else None
+    sd._coarse = (half, quarter)
+    sd._tail = tail
+    est = sd.estimate_error(order=order)
     sd.error_estimate = est
+    sd.error_method = (f"three grids: L1(p on {tuple(grid)}, p on {coarse_grid}) / (2**p - 1) (Richardson), p the "
+                       f"order observed against {quarter_grid} within [{MIN_ORDER:g}, {order:g}] (the lowest fitted), "
+                       f"+ {tail:.2g} (probability in the top 10 % of [0, h_max], where the reflecting top moves it); "
+                       "no model error (the full (x, y) problem is solved)")
     if est > tol:
         warnings.warn(f"grid {tuple(grid)} too coarse: estimated L1 error of p(H) {est:.2g} > tol={tol:g} "
                       "(from the solve on a grid twice coarser); refine the grid", GridWarning, stacklevel=2)

@@ -1,4 +1,5 @@
-"""``vibro pdf``: the stationary energy density p(H) by stochastic averaging (and optionally p(x, y))."""
+"""``vibro pdf``: the stationary energy density p(H) (and optionally p(x, y)) by the method chosen for a default
+tolerance, or by the one named with ``--method``."""
 
 from __future__ import annotations
 
@@ -16,24 +17,34 @@ def register(subparsers) -> None:
     >>> from vibro.cli import build_parser
     >>> args = build_parser().parse_args(["pdf", "--method", "jump", "--out", "p.csv"])
     >>> args.method, args.h_max, args.points, build_parser().parse_args(["pdf", "--out", "p.csv"]).method
-    ('jump', 4.0, 2000, 'jump')
+    ('jump', 4.0, 2000, 'auto')
     """
     from .common import add_model_arguments
     from .names import DENSITY_METHODS
 
     p = subparsers.add_parser(
-        "pdf", help="stationary p(H) (and p(x, y)) by energy-envelope averaging or the phase-plane FPK solver",
-        description="Compute the stationary energy density p(H) of eq. 30 on [0, h-max], normalised to 1 there, "
-                    "with the impact losses treated as in the paper (eq. 13 as a drift), as the exact two-impact "
-                    "loss, or as jumps of the averaged energy. Prints E[H] and P(H < G(delta)).",
+        "pdf", help="stationary p(H) (and p(x, y)) by the cheapest method that meets a default tolerance, or a "
+                    "named one: averaging (paper, jump, chain), the phase-plane FPK solver (fpk) or the exact formula",
+        description="Compute the stationary energy density p(H) on [0, h-max], normalised to 1 there, and print "
+                    "E[H] and P(H < G(delta)). Without --method the method is chosen as by vibro solve at --tol "
+                    f"(default {PDF_TOL}): the cheapest whose estimated L1 error of p(H) meets it, run, and its "
+                    "estimate checked (a miss refines fpk's grid or moves to the next method). The methods: exact "
+                    "(the elastic Gibbs density; exact for elastic impacts, linear damping, additive noise); paper "
+                    "(energy-envelope averaging of eq. 30 with the impact loss of eq. 13 as a drift); "
+                    "exact-two-impact (the same with the exact loss of two impacts per cycle); jump (impacts as "
+                    "Poisson-timed jumps of the averaged energy); chain (the jumps once per flight, T(H)/walls: about "
+                    "0.1 s); fpk (the full (x, y) Fokker-Planck equation with impacts as boundary conditions, on an "
+                    "energy-angle grid, with a three-grid error estimate: 0.1-1 s). paper, jump and chain carry a "
+                    "rating of their error measured against fpk over a sweep of models (benchmarks/method_ratings.py)"
+                    "; where none covers the model and it is self-excited or strongly dissipative, they are refused "
+                    "unless --force is given.",
     )
     add_model_arguments(p)
-    p.add_argument("--method", choices=(*DENSITY_METHODS, "fpk"), default="jump",
-                   help="jump (default: impacts as jumps of the averaged energy, 3-4x closer to Monte Carlo than "
-                        "paper), paper (eq. 13 drift), exact-two-impact, chain (the jumps once per flight T(H)/walls "
-                        "instead of at Poisson times: ~0.05 s, median L1 0.0055 on the paper's cases against jump's "
-                        "0.029), or fpk (the full (x, y) Fokker-Planck problem with impact boundary conditions: "
-                        "about 0.5 s, within ~0.005 of Monte Carlo)")
+    p.add_argument("--method", choices=("auto", *DENSITY_METHODS, "fpk"), default="auto",
+                   help="auto (default: the cheapest method whose estimated error meets --tol, the exact formula "
+                        "included), paper, exact-two-impact, jump, chain or fpk (see above)")
+    p.add_argument("--tol", type=float, default=PDF_TOL,
+                   help=f"--method auto: target L1 distance of p(H) on 40 bins (default {PDF_TOL})")
     p.add_argument("--grid", type=int, nargs=2, default=None, metavar=("NH", "NPHI"),
                    help="--method fpk: energy rings and angle cells per ring; cost ~ NH x NPHI (a sparse LU); default "
                         "160 192, and 120 128 for a forced model")
@@ -69,6 +80,8 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+PDF_TOL = 0.01
+"""The L1 tolerance of p(H) that ``vibro pdf`` without ``--method`` meets (vibro solve's default is 0.02)."""
 _MAX_POINTS = 10_000_000  # stationary_density's own limit
 _BYTES_PER_POINT = 8 * 12  # the output arrays, the jump chain's grid arrays and the CSV text, about
 _MAX_JOINT_CELLS = 10_000**2
@@ -238,10 +251,11 @@ def run(args: argparse.Namespace) -> int:
         plan.file(args.joint, "--joint", sidecar=True)
     model = model_from_args(args)
     forced = bool(getattr(model, "is_forced", False))
-    if args.phases and not (forced and args.method == "fpk"):
+    if args.phases and not (forced and args.method in ("fpk", "auto")):
         raise ParameterError("--phases needs --method fpk and a forced model (forcing='A*cos(Omega*t)'), "
                              f"not --method {args.method} on {model.name!r}" + ("" if forced else " (unforced)"))
-    if forced and args.method == "fpk":
+    if forced and args.method in ("fpk", "auto"):  # the only density method for a forced model: the periodic fpk
+        args.method = "fpk"
         return _run_forced(args, model, plan)
     if args.equations is not None:
         from averaging import averaging_equations
@@ -250,7 +264,17 @@ def run(args: argparse.Namespace) -> int:
         print(eq.latex() if args.equations == "latex" else eq)
     started = time.perf_counter()
     refusal = None
-    if args.method == "fpk":
+    chosen = None
+    if args.method == "auto":
+        from vibro.solve import solve
+        from vibro.solve.choice import check_request
+
+        check_request(args.tol, 600.0)
+        if args.force:
+            raise ParameterError("--force applies to a named averaging --method, not to the automatic choice")
+        sol = solve(model, args.tol, h_max=args.h_max, points=args.points, monte_carlo=False)
+        sd, chosen = sol.result, sol
+    elif args.method == "fpk":
         from averaging.phase_plane import stationary_density_xy
 
         args.grid = _grid(args, (160, 192))
@@ -258,25 +282,24 @@ def run(args: argparse.Namespace) -> int:
     else:
         from vibro.solve import diagnose
         from vibro.solve.choice import averaging_refusal
-        from vibro.solve.diagnostics import CALIBRATED_GEOMETRIES
+        from vibro.solve.errormodel import predict_averaging_error
 
         # the density first: its own checks (energy scale, confinement) give the more precise refusal
         sd = stationary_density(model, args.method, h_max=args.h_max, points=args.points)
         diag = diagnose(model)
         refusal = averaging_refusal(diag)
-        if diag.geometry not in CALIBRATED_GEOMETRIES and not refusal:
+        if np.isnan(predict_averaging_error(args.method, diag)) and not refusal:
             from vibro.solve.choice import UnmeasuredAccuracyWarning
 
-            warnings.warn(f"{diag.geometry} walls: the accuracy of --method {args.method} is not rated by the error "
-                          "model here (fitted on symmetric gaps); measured L1 against Monte Carlo is in "
-                          "benchmarks/geometry_averaging.py", UnmeasuredAccuracyWarning, stacklevel=2)
+            warnings.warn(f"the accuracy of --method {args.method} is not rated for this model ({diag.geometry} "
+                          "walls; no rating of benchmarks/method_ratings.py covers it): use --method fpk, which "
+                          "carries its own error estimate", UnmeasuredAccuracyWarning, stacklevel=2)
         if refusal and not args.force:
             raise ModelError(f"{refusal}; use --method fpk or vibro mc, or --force to compute it anyway")
         if refusal:
             warnings.warn(f"--force: {refusal}", VibroWarning, stacklevel=2)
         if args.method != "chain":  # the a-posteriori check against the chain (warns outside validity)
             from vibro.solve.choice import averaging_cross_check
-            from vibro.solve.errormodel import predict_averaging_error
 
             averaging_cross_check(model, sd, predict_averaging_error(args.method, diag))
     _check_resolved(args, sd)
@@ -301,14 +324,24 @@ def run(args: argparse.Namespace) -> int:
     results = {"mean_energy": sd.mean_energy, "prob_below_barrier": sd.prob_below_barrier, "mean_x2": sd.mean_x2,
                "impact_rate": sd.impact_rate, "barrier_energy": Gd if walls else None, "averaging_refusal": refusal}
     settings = {"method": args.method, "h_max": args.h_max, "points": args.points, "force": args.force}
+    if chosen is not None:
+        settings["tol"] = args.tol
+        results.update(chosen_method=chosen.method, reason=chosen.choice.reason,
+                       estimated_error=chosen.estimated_error, estimate_source=chosen.estimate_source)
     if args.method == "fpk":
         settings["grid"] = list(args.grid)
+    elif chosen is not None and "grid" in chosen.choice.settings:
+        settings["grid"] = list(chosen.choice.settings["grid"])
     rec = record("pdf", model=model, settings=settings, results=results, started=started)
     write_sidecar(args.out, rec)
     if args.joint is not None:  # its own record, so that vibro plot finds the barriers beside the joint CSV too
         write_sidecar(args.joint, {**rec, "output": "joint",
                                    "settings": {**rec["settings"], "joint_points": args.joint_points}})
-    print(f"model {model.name} {dict(model.params)} restitution {model.restitution.spec()} method {args.method}")
+    method = args.method if chosen is None else f"auto -> {chosen.method}"
+    print(f"model {model.name} {dict(model.params)} restitution {model.restitution.spec()} method {method}")
+    if chosen is not None:
+        print(f"chosen for --tol {args.tol:g}: {chosen.choice.reason}")
+        print(f"estimated L1 error of p(H): {chosen.estimated_error:.3g} ({chosen.estimate_source})")
     print(f"noise: {noise_assumption(model)['text']}")
     print(f"E[H] = {sd.mean_energy:.8g}")
     if walls:

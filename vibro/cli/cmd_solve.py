@@ -1,4 +1,5 @@
-"""``vibro solve --tol 0.02``: p(H) by the cheapest method predicted to reach the tolerance, with the reason."""
+"""``vibro solve --tol 0.02``: p(H) by the cheapest method whose estimated error meets the tolerance, with the
+reason and the estimate after the run."""
 
 from __future__ import annotations
 
@@ -18,20 +19,30 @@ def register(subparsers) -> None:
     >>> args.tol, args.method, args.param
     (0.05, 'auto', ['delta=0.8'])
     """
+    from vibro.solve.solver import METHODS as SOLVE_METHODS
+
     from .common import add_model_arguments
 
     p = subparsers.add_parser(
-        "solve", help="stationary p(H) by the cheapest adequate method (exact, averaging or Monte Carlo)",
-        description="Pick the cheapest method predicted to reach --tol in the L1 distance of p(H): the exact "
-                    "elastic formula when impacts are elastic at every reachable speed, the paper's averaging when "
-                    "the energy lost per cycle is small, the jump averaging when impacts dominate, Monte Carlo "
-                    "otherwise (dt and paths from a measured error model). Prints the choice, why, the expected "
-                    "error and the cost.",
+        "solve", help="stationary p(H) by the cheapest method whose estimated error meets --tol (exact, paper, jump, "
+                      "chain, fpk or Monte Carlo), with the estimate after the run",
+        description="Consider, cheapest first: exact (the elastic Gibbs density, when impacts are elastic at every "
+                    "reachable speed, the damping linear and the noise additive); paper, jump and chain (energy-"
+                    "envelope averaging: the impact loss as a drift, as Poisson-timed jumps, or as jumps once per "
+                    "flight; milliseconds to 0.1 s), each with a rating of its L1 error measured against the phase-"
+                    "plane solver over a sweep of models (benchmarks/method_ratings.py; not rated outside it); fpk "
+                    "(the full (x, y) Fokker-Planck equation with impacts as boundary conditions, 0.1-2 s, on the "
+                    "coarsest grid predicted to meet --tol, with its own three-grid error estimate); Monte Carlo only "
+                    "where none of these applies (forced or multi-well models; dt and paths planned from the "
+                    "scheme's bias constant and a pilot run). Runs the cheapest one predicted to meet --tol, then "
+                    "reports the error estimated after the run and how it was made; when that misses --tol it "
+                    "escalates (a finer fpk grid, or the next method). L1 is measured on 40 bins of [0, h_max].",
     )
     add_model_arguments(p)
     p.add_argument("--tol", type=float, default=0.02, help="target L1 distance of p(H) (default 0.02)")
-    p.add_argument("--method", default="auto", choices=["auto", "exact", "paper", "jump", "fpk", "monte-carlo"],
-                   help="force a method (default: auto)")
+    p.add_argument("--method", default="auto", choices=list(SOLVE_METHODS),
+                   help="force a method (default: auto, the choice above); a forced method is run once, "
+                        "without escalation, and warns when its estimate misses --tol")
     p.add_argument("--max-cost", type=float, default=600.0, dest="max_cost",
                    help="wall-time budget of Monte Carlo in seconds (default 600)")
     p.add_argument("--seed", type=int, default=1,
@@ -101,7 +112,9 @@ def run(args) -> int:
 
         path = write_csv_atomically(sol.to_pandas(), args.out)
         results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,
-                   "estimated_error": sol.estimated_error, "predictions": sol.choice.predictions}
+                   "estimated_error": sol.estimated_error, "estimate_source": sol.estimate_source,
+                   "predictions": sol.choice.predictions,
+                   "attempts": [{"method": m, "settings": st, "estimate": e} for m, st, e in sol.attempts]}
         settings = {"tol": args.tol, "max_cost": args.max_cost, "seed": args.seed, "forced_method": args.method,
                     **sol.choice.settings}
         side = write_sidecar(path, record("solve", model=model, settings=settings, results=results, started=t0))

@@ -1,25 +1,24 @@
-"""Choose the cheapest method that is predicted to reach a tolerance in the L1 distance of p(H).
+"""Choose the cheapest method whose estimated L1 error of p(H) meets a tolerance.
 
-``choose(model, tol)`` looks at the model before computing anything expensive:
+``choose(model, tol)`` looks at the model before computing anything expensive and considers, cheapest first:
 
 1. **exact**: the impacts are elastic at every *reachable* impact speed (law elastic, or V_C so high that the
    stationary impact-speed tail P(|v| > V_C) under the elastic density is below tol/10), the damping is linear
    (h = c*y) and the noise additive. Then p(H) is proportional to T(H) exp(-2cH/sigma**2), exactly.
-2. **paper** averaging (the drift form of the impact loss) when the energy lost per cycle is small.
-3. **jump** averaging (impacts as jumps of the averaged energy) when impacts dominate the dissipation but each
-   cycle still loses a small share of the energy between impacts.
-4. **fpk**, the phase-plane solver of the full problem, when its measured floor meets the tolerance;
-5. **Monte Carlo** otherwise, planned by :mod:`vibro.solve.planner`.
+2. **paper**, **jump**, **chain** (energy-envelope averaging; milliseconds, about 0.1 s for chain): their error is
+   rated against the phase-plane solver over a sweep of models (``benchmarks/method_ratings.py``, per wall
+   family: symmetric, asymmetric, one-sided, equilibrium; self-excited damping included). A method is a candidate
+   where a rating covers the model (:func:`~vibro.solve.errormodel.rating`), and chosen when its rating meets tol.
+3. **fpk**, the phase-plane solver of the full (x, y) problem, on the coarsest grid of :data:`FPK_GRIDS` predicted
+   to meet tol; it carries its own a-posteriori estimate (three grids), so it is the method for models no rating
+   covers, and :func:`~vibro.solve.solve` refines its grid when the estimate misses.
+4. **Monte Carlo** only where no deterministic method applies (a forced or multi-well model), planned by
+   :mod:`vibro.solve.planner`.
 
-The error model was fitted on symmetric gaps. For other walls (one-sided, asymmetric, a wall at the equilibrium)
-its predictions for paper and jump are NaN (not measured): the chooser does not pick them there and says so in the
-reason (``exact`` still holds: the elastic Gibbs density does not depend on where the walls are; ``fpk`` is rated
-where its floor was measured, :data:`~vibro.solve.errormodel.FPK_GEOMETRIES`). Forcing an unrated method warns
+Averaging is refused only where no rating covers the model and the 90th-percentile energy loses more than
+``MAX_DAMPING_RATIO`` of its energy per cycle to the damping force or more than ``MAX_IMPACT_RATIO`` to impacts, or
+the damping feeds energy in: the quasi-conservative assumption is unverified there. Forcing an unrated method warns
 with :class:`UnmeasuredAccuracyWarning`.
-
-The predicted error of each averaging method is the error model of :mod:`vibro.solve.errormodel`. Averaging is
-refused when the 90th-percentile energy level loses more than ``MAX_DAMPING_RATIO`` of its energy per cycle to the
-damping force, or more than ``MAX_IMPACT_RATIO`` to impacts: the quasi-conservative assumption is broken there.
 """
 
 from __future__ import annotations
@@ -129,12 +128,12 @@ class Choice:
     Attributes
     ----------
     method : str
-        ``exact``, ``paper``, ``jump`` or ``monte-carlo``.
+        ``exact``, ``paper``, ``jump``, ``chain``, ``fpk`` or ``monte-carlo``.
     reason : str
     expected_error : float
     expected_cost : float
     settings : dict
-        For Monte Carlo: scheme, dt, paths, t_end, t_burn.
+        For fpk: grid. For Monte Carlo: scheme, dt, paths, t_end, t_burn.
     predictions : dict
         Predicted L1 error of every candidate (inf when refused).
     diagnostics : Diagnostics
@@ -150,7 +149,7 @@ class Choice:
 
     def summary(self) -> str:
         """Human-readable lines: method, why, expected error and cost."""
-        err = "not measured for this geometry" if math.isnan(self.expected_error) else f"{self.expected_error:.3g}"
+        err = "not rated for this model" if math.isnan(self.expected_error) else f"{self.expected_error:.3g}"
         s = [f"method: {self.method}", f"why: {self.reason}",
              f"expected L1 error of p(H): {err}", f"expected cost: {self.expected_cost:.3g} s"]
         if self.settings:
@@ -176,9 +175,51 @@ def check_request(tol, max_cost) -> None:
         raise ParameterError(f"max_cost={max_cost!r} must be a finite positive wall time in seconds, e.g. 600")
 
 
+FPK_GRIDS = ((48, 64), (64, 80), (80, 96), (120, 144), (160, 192), (240, 288), (320, 384))
+"""The grids (rings, angles) ``choose`` and ``solve`` take fpk on, coarsest first."""
+FPK_PREDICT_ORDER = 1.75
+"""Order by which fpk's estimate is predicted to fall with the grid (fitted on Fig. 2, benchmarks/fpk_convergence.py);
+the run's own estimate decides, and a miss refines the grid."""
+COSTS = {"exact": 0.02, "paper": 0.05, "jump": 0.05, "chain": 0.15}
+"""Wall time (s) of each averaging density at 2000 points (the diagnostics already spent), for ordering."""
+
+
+def fpk_grid_for(tol: float, start=None) -> tuple[int, int]:
+    """The coarsest grid of :data:`FPK_GRIDS` whose predicted estimate meets half of ``tol`` (a margin).
+
+    The prediction scales the sweep's median estimate at the default grid (160, 192) by (160 / rings)**1.75: a
+    start, not a promise (``solve`` refines the grid when the run's own estimate misses); ``start`` (a grid) gives
+    a lower bound.
+
+    Examples
+    --------
+    >>> fpk_grid_for(0.02)
+    (48, 64)
+    """
+    floor = fpk_typical()
+    for g in FPK_GRIDS:
+        if start is not None and g[0] < start[0]:
+            continue
+        if floor * (160.0 / g[0]) ** FPK_PREDICT_ORDER <= tol / 2.0:
+            return g
+    return FPK_GRIDS[-1]
+
+
+def fpk_typical() -> float:
+    """The sweep's median fpk estimate (40 bins) at the default grid (160, 192)."""
+    m = error_model()["fpk"]
+    return m.get("median", m["floor"])
+
+
+def fpk_cost(grid) -> float:
+    """Seconds of one fpk solve with its estimate on ``grid`` (about 1e-5 s per cell with the coarse solve on
+    2 shared cores, plus the set-up)."""
+    return 0.05 + 1.0e-5 * 1.25 * grid[0] * grid[1]
+
+
 def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Diagnostics | None = None,
            mc_pilot: bool = True, seed: int = 1) -> Choice:
-    """Pick the cheapest method predicted to reach ``tol`` in the L1 distance of p(H).
+    """Pick the cheapest method whose estimated L1 error of p(H) meets ``tol``.
 
     Parameters
     ----------
@@ -207,55 +248,55 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     try:
         diag = diagnostics if diagnostics is not None else diagnose(model)
     except ModelError as exc:
-        return mc_choice(model, tol, None, f"averaging does not apply ({exc})", {}, max_cost, mc_pilot, seed)
+        return mc_choice(model, tol, None, f"no deterministic method applies ({exc})", {}, max_cost, mc_pilot, seed)
     preds = {}
     reasons = []
     elastic_enough = diag.elastic_law or diag.tail_impact_speed < tol / 10.0
     preds["exact"] = predict_averaging_error("exact", diag) if elastic_enough else math.inf
-    refusal = averaging_refusal(diag)
-    for name in ("paper", "jump"):
-        preds[name] = math.inf if refusal else predict_averaging_error(name, diag)
     if preds["exact"] <= tol:
         why = ("there are no walls, so no impacts" if diag.geometry == "none" else
                "impacts are elastic" if diag.elastic_law else
                f"impacts faster than V_C={diag.elastic_below:g} are rare: P(|v| > V_C) = "
                f"{diag.tail_impact_speed:.2g} < tol/10 under the elastic density")
         return Choice("exact", why + "; linear damping and additive noise make p(H) ~ T(H) exp(-beta H) exact",
-                      preds["exact"], averaging_cost(), {}, preds, diag)
+                      preds["exact"], COSTS["exact"], {}, preds, diag)
+    refusal = averaging_refusal(diag)
+    for name in ("paper", "jump", "chain"):
+        preds[name] = math.inf if refusal else predict_averaging_error(name, diag)
     if refusal:
         reasons.append(refusal)
-    unmeasured = math.isnan(preds["paper"])
-    if unmeasured and not refusal:
-        reasons.append(f"{diag.geometry} walls: the averaging error model has no data for this geometry (fitted on "
-                       "symmetric gaps), so no accuracy of paper or jump is claimed and neither is chosen")
-    if not refusal and not unmeasured:
-        for name in ("paper", "jump"):  # cheapest first
-            if preds[name] <= tol:
-                why = (f"energy lost per cycle is small (impacts {diag.r_imp:.3f} H, damping {diag.r_damp:.3f} H "
-                       "on average)") if name == "paper" else (
-                       f"impact losses ({diag.r_imp:.3f} H per cycle) are too large for a drift but well described "
-                       "as jumps of the averaged energy")
-                return Choice(name, why, preds[name], averaging_cost(), {}, preds, diag)
-        reasons.append(
-            f"no averaging method is predicted within tol={tol:g} (paper {preds['paper']:.3f}, "
-            f"jump {preds['jump']:.3f})"
-        )
-    # the phase-plane solver of the full (x, y) problem: accurate to its measured floor, about a second; offered
-    # only where that floor was measured (the paper's quasi-conservative cases and the equilibrium wall), not where
-    # averaging is refused
-    preds["fpk"] = math.inf if refusal else predict_averaging_error("fpk", diag)
-    if preds["fpk"] <= tol:  # False for NaN (not measured)
-        why = "; ".join(reasons) + "; the phase-plane FPK solver (impacts as boundary conditions) reaches it"
-        return Choice("fpk", why, preds["fpk"], error_model()["fpk"]["cost_s"], {}, preds, diag)
-    return mc_choice(model, tol, diag, "; ".join(reasons), preds, max_cost, mc_pilot, seed)
+    elif all(math.isnan(preds[n]) for n in ("paper", "jump", "chain")):
+        reasons.append("no rating of the averaging methods covers this model (its wall family, noise or loss "
+                       "ratios lie outside the sweep of benchmarks/method_ratings.py)")
+    else:
+        for name in ("paper", "jump", "chain"):  # cheapest first
+            if preds[name] <= tol:  # False for NaN (not rated)
+                why = (f"its rating against fpk ({_family(diag)} walls, impacts lose {diag.r_imp:.3f} H and damping "
+                       f"{diag.r_damp:.3f} H per cycle) is {preds[name]:.3g} <= tol")
+                return Choice(name, why, preds[name], COSTS[name], {}, preds, diag)
+        rated = ", ".join(f"{n} {preds[n]:.3f}" for n in ("paper", "jump", "chain") if math.isfinite(preds[n]))
+        reasons.append(f"no averaging method is rated within tol={tol:g} ({rated})")
+    grid = fpk_grid_for(tol)
+    preds["fpk"] = fpk_typical() * (160.0 / grid[0]) ** FPK_PREDICT_ORDER
+    why = "; ".join(reasons) + (f"; the phase-plane FPK solver (impacts as boundary conditions) on grid {grid} "
+                                "carries its own three-grid error estimate")
+    return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
+
+
+def _family(diag) -> str:
+    from .errormodel import RATING_FAMILIES
+
+    return RATING_FAMILIES.get(diag.geometry, diag.geometry)
 
 
 def averaging_refusal(diag: Diagnostics) -> str | None:
     """Why energy-envelope averaging must not be trusted for this model, or None when it may be.
 
-    The one rule behind ``choose`` and ``vibro pdf``: refused when the 90th-percentile energy loses more than
-    ``MAX_DAMPING_RATIO`` of H per cycle to damping or ``MAX_IMPACT_RATIO`` to impacts (not quasi-conservative), or
-    when the damping feeds energy in somewhere (self-excited, outside the calibrated domain).
+    The one rule behind ``choose`` and ``vibro pdf``. Where a rating of the averaging methods covers the model
+    (:func:`~vibro.solve.errormodel.rating` for ``chain``), their error is measured there, so they are not
+    refused. Otherwise refused when the 90th-percentile energy loses more than ``MAX_DAMPING_RATIO`` of H per cycle
+    to damping or ``MAX_IMPACT_RATIO`` to impacts (not quasi-conservative), or when the damping feeds energy in
+    somewhere (self-excited).
 
     Examples
     --------
@@ -265,20 +306,23 @@ def averaging_refusal(diag: Diagnostics) -> str | None:
     >>> "self-excited" in averaging_refusal(diagnose(DuffingImpact().with_params(c=-0.1)))
     True
     """
+    from .errormodel import rating
+
+    if rating("chain", diag) is not None:
+        return None
     if diag.r_damp_p90 > MAX_DAMPING_RATIO or diag.r_imp_p90 > MAX_IMPACT_RATIO:
         return (f"averaging refused: the 90th-percentile energy loses {diag.r_damp_p90:.2f} of H per cycle to damping "
                 f"(limit {MAX_DAMPING_RATIO}) and {diag.r_imp_p90:.2f} to impacts (limit {MAX_IMPACT_RATIO}), "
-                "so the system is not quasi-conservative")
+                "so the system is not quasi-conservative, and no rating covers it")
     if diag.self_excited:
         return ("averaging not trusted: the damping feeds energy in somewhere (self-excited, e.g. van der Pol or "
-                "negative damping), outside the dissipative models on which the averaging error model was calibrated")
+                "negative damping) and no rating of the sweep covers this model")
     return None
 
 
 def averaging_cost() -> float:
-    # one density on a 2000-point grid: 0.01-0.03 s in the work-precision bench, plus the diagnostics already spent
-    return 0.05
-
+    """Wall time (s) of one averaging density at 2000 points (the diagnostics already spent)."""
+    return COSTS["paper"]
 
 
 def mc_choice(model, tol, diag, reason, preds, max_cost, pilot, seed) -> Choice:

@@ -1,8 +1,9 @@
 """The fitted error models: predicted L1 distance of p(H) for each method, from the diagnostics.
 
-The constants are data, not code. ``vibro bench validity`` fits the averaging error model and ``vibro bench
-work-precision`` the Monte Carlo bias constants; both write ``vibro/solve/data/*.json`` (package data), which this
-module loads. Each file records how it was fitted.
+The constants are data, not code. ``benchmarks/method_ratings.py`` rates ``paper``, ``jump`` and ``chain``
+against the phase-plane solver ``fpk`` over a sweep of models and writes the ratings into ``error_model.json``;
+``vibro bench work-precision`` writes the Monte Carlo bias constants (``mc_bias.json``). Both are package data in
+``vibro/solve/data``, which this module loads; each records how it was fitted.
 """
 
 from __future__ import annotations
@@ -54,30 +55,75 @@ MC_SCHEMES = ("splitting", "milstein")
 """Monte Carlo schemes in order of preference (splitting needs damping linear in y and noise free of y)."""
 AVERAGING_GEOMETRIES = ("none", "symmetric")
 """Wall geometries on which the averaging error model was fitted (the paper's symmetric gaps, no walls)."""
-FPK_GEOMETRIES = ("none", "symmetric", "equilibrium")
-"""Wall geometries on which the fpk floor was measured: the paper's cases and the linear oscillator against a wall
-at its equilibrium (benchmarks/density_accuracy.py: E[H] within 0.08 % and 0.69 % of Monte Carlo at r = 0.8, 0.6)."""
 L1_BINS = 40
 """Bins of the common H grid on which every L1 distance of p(H) is measured."""
 
 
-def predict_averaging_error(method: str, diag: Diagnostics) -> float:
-    """Predicted L1 distance of an averaging method from converged Monte Carlo (the fitted error model).
+RATED_METHODS = ("paper", "jump", "chain")
+"""The averaging methods rated against fpk over the sweep of ``benchmarks/method_ratings.py``."""
+RATING_FAMILIES = {"none": "symmetric", "symmetric": "symmetric", "asymmetric": "asymmetric",
+                   "one-sided": "one-sided", "equilibrium": "equilibrium"}
+"""The wall family whose rating applies to each barrier geometry (no walls: the symmetric family's)."""
 
-    NaN (not measured) for ``paper``, ``jump`` and ``exact-two-impact`` on a barrier geometry other than a symmetric
-    gap (or none): the constants were fitted there only. ``fpk`` is rated on those and on a wall at the equilibrium
-    (:data:`FPK_GEOMETRIES`). ``exact`` holds for any walls (it is the elastic Gibbs density).
+
+def rating(method: str, diag: Diagnostics) -> dict | None:
+    """The fitted rating of ``method`` that covers this model, or None where none does.
+
+    None when the sweep has no rating for the wall family, when the noise is not additive (the sweep held additive
+    noise only), or when the model's diagnostics (r_imp, r_damp) lie outside the box the sweep covered.
 
     Examples
     --------
-    >>> from vibro.solve.diagnostics import Diagnostics
-    >>> d = Diagnostics(True, True, False, 0.4, 0.9, 0.0, 0.01, 0.05, 0.0, 20.0, 0.55)
-    >>> predict_averaging_error("paper", d) == error_model()["paper"]["floor"]
+    >>> from vibro.solve import diagnose
+    >>> from models import DuffingImpact
+    >>> rating("chain", diagnose(DuffingImpact()))["cases"] > 0
     True
     """
-    rated = FPK_GEOMETRIES if method == "fpk" else AVERAGING_GEOMETRIES
-    if method != "exact" and getattr(diag, "geometry", "symmetric") not in rated:
-        return math.nan  # not measured on this geometry
+    fam = RATING_FAMILIES.get(getattr(diag, "geometry", "symmetric"))
+    r = error_model().get("ratings", {}).get(method, {}).get(fam)
+    if r is None or not diag.additive_noise:
+        return None
+    if _rated_features(r, diag) is None:
+        return None
+    return r
+
+
+def _rated_features(r: dict, diag: Diagnostics):
+    """(r_imp, r_damp) to evaluate the rating at, or None outside the rated box. Beyond the box on the side where
+    the power law only grows with the distance (below the lowest r_imp for a positive exponent, ...), the box's
+    edge is taken: the rating there bounds the model's from above."""
+    out = []
+    for name, exponent in (("r_imp", r["exp_imp"]), ("r_damp", r["exp_damp"])):
+        lo, hi = r["rated_box"][name]
+        v = float(getattr(diag, name))
+        if lo <= v <= hi:
+            out.append(v)
+        elif v < lo and exponent >= 0:
+            out.append(lo)
+        elif v > hi and exponent <= 0:
+            out.append(hi)
+        else:
+            return None
+    return out
+
+
+def predict_averaging_error(method: str, diag: Diagnostics) -> float:
+    """Predicted L1 error of p(H) (40 bins) of ``method`` for a model with these diagnostics.
+
+    ``paper``, ``jump``, ``chain``: the rating fitted against fpk over the sweep (:func:`rating`: an upper quantile,
+    exp(log_scale) (r_imp + shift)**exp_imp (r_damp + shift)**exp_damp), NaN where no rating covers the model.
+    ``exact``: the Gibbs formula's error from the neglected inelastic tail (inf without linear damping and additive
+    noise). ``fpk``: the upper quantile of its own estimate at the default grid over the sweep (``solve`` reports
+    the run's estimate). ``exact-two-impact``: the older fit against Monte Carlo on symmetric gaps (NaN elsewhere).
+
+    Examples
+    --------
+    >>> from vibro.solve import diagnose
+    >>> from models import DuffingImpact
+    >>> d = diagnose(DuffingImpact())
+    >>> predict_averaging_error("chain", d) < predict_averaging_error("paper", d)
+    True
+    """
     if method == "exact":
         m = error_model()["exact"]
         if not (diag.linear_damping and diag.additive_noise):
@@ -85,7 +131,14 @@ def predict_averaging_error(method: str, diag: Diagnostics) -> float:
         return m["floor"] + m["tail"] * diag.tail_impact_speed
     if method == "fpk":
         return error_model()["fpk"]["floor"]
+    if method in RATED_METHODS:
+        r = rating(method, diag)
+        if r is None:
+            return math.nan
+        r_imp, r_damp = _rated_features(r, diag)
+        return math.exp(r["log_scale"]) * (r_imp + r["shift"]) ** r["exp_imp"] * (r_damp + r["shift"]) ** r["exp_damp"]
+    if getattr(diag, "geometry", "symmetric") not in AVERAGING_GEOMETRIES:
+        return math.nan  # not measured on this geometry
     m = error_model()[method]
     damp = 0.0 if (diag.linear_damping and diag.additive_noise) else diag.r_damp
     return m["floor"] + m["slope"] * diag.r_imp + m["slope_damp"] * damp
-

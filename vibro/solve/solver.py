@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from hybrid.errors import ModelError, ParameterError, VibroWarning
 
-from .choice import Choice, averaging_cost, check_request, choose, mc_choice
+from .choice import Choice, averaging_cost, check_request, choose, fpk_grid_for, mc_choice
 from .diagnostics import diagnose
 from .errormodel import L1_BINS, bias_constants, predict_averaging_error
 from .metrics import bin_masses, l1_between_histograms, rebin_counts
@@ -32,10 +32,15 @@ class Solution:
     wall_time : float
         Seconds spent computing the density (diagnostics included).
     estimated_error : float
-        For Monte Carlo, the statistical error measured from two independent halves plus the bias model;
-        for averaging, the predicted error.
+        The L1 error estimated after the run: for fpk its three-grid (Richardson) estimate on the ``L1_BINS`` bins;
+        for Monte Carlo the statistical error measured from two independent halves plus the bias model; for
+        averaging its rating against fpk (raised when the a-posteriori check against the chain disagrees).
     result : object
-        The underlying StationaryDensity or EnsembleStatistics.
+        The underlying StationaryDensity, PhaseDensity or EnsembleStatistics.
+    estimate_source : str
+        How ``estimated_error`` was made.
+    attempts : list of (method, settings, estimate)
+        Every run, in order, when the first one's estimate missed the tolerance and ``solve`` escalated.
     """
 
     H: np.ndarray
@@ -46,6 +51,8 @@ class Solution:
     wall_time: float
     estimated_error: float
     result: object
+    estimate_source: str = ""
+    attempts: list = field(default_factory=list)
 
     @property
     def method(self) -> str:
@@ -71,12 +78,21 @@ class Solution:
 
     def summary(self) -> str:
         """The choice, its reason, the wall time and the estimated error, as printed by ``vibro solve``."""
-        return (self.choice.summary() + f"\nmeasured wall time: {self.wall_time:.3g} s"
-                + f"\nestimated L1 error: {self.estimated_error:.3g}")
+        out = self.choice.summary()
+        if len(self.attempts) > 1:
+            out += "\nescalated: " + " -> ".join(f"{m}{' ' + str(st['grid']) if 'grid' in st else ''} ({e:.3g})"
+                                                  for m, st, e in self.attempts)
+        return (out + f"\nmeasured wall time: {self.wall_time:.3g} s"
+                + f"\nestimated L1 error after the run: {self.estimated_error:.3g} ({self.estimate_source})")
+
+
+METHODS = ("auto", "exact", "paper", "jump", "chain", "fpk", "monte-carlo")
+"""What ``solve`` (and ``vibro solve --method``) accepts."""
 
 
 def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 600.0, seed: int = 1,
-          h_max: float | None = None, progress: bool = False) -> Solution:
+          h_max: float | None = None, progress: bool = False, points: int = 2000,
+          monte_carlo: bool = True) -> Solution:
     """Stationary p(H) by the cheapest method predicted to reach ``tol`` (L1), with the reason and the cost.
 
     Parameters
@@ -85,13 +101,20 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
     tol : float
         Target L1 distance of p(H).
     method : str
-        ``auto`` (default) or force one of ``exact``, ``paper``, ``jump``, ``monte-carlo``.
+        ``auto`` (default) or force one of ``exact``, ``paper``, ``jump``, ``chain``, ``fpk``, ``monte-carlo``.
+        With ``auto`` the chosen method is run and its estimate checked; when the estimate misses ``tol``, fpk's
+        grid is refined, and an averaging method gives way to the next candidate (chain, then fpk).
     max_cost : float
         Wall-time budget for Monte Carlo (seconds).
     seed : int
     h_max : float, optional
         Energy range (default: from the diagnostics).
     progress : bool
+    points : int
+        Energies of the output p(H) of the deterministic methods.
+    monte_carlo : bool
+        False: raise :class:`~hybrid.errors.ModelError` instead of running Monte Carlo where no deterministic
+        method applies (``vibro pdf``).
 
     Returns
     -------
@@ -107,8 +130,8 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
     check_request(tol, max_cost)  # also for method='monte-carlo', which does not go through choose
     t0 = time.perf_counter()
     forced = method != "auto"
-    if method not in ("auto", "exact", "paper", "jump", "fpk", "monte-carlo"):
-        raise ParameterError(f"method={method!r}; use auto, exact, paper, jump, fpk or monte-carlo")
+    if method not in METHODS:
+        raise ParameterError(f"method={method!r}; use one of {', '.join(METHODS)}")
     if method == "monte-carlo":
         try:
             diag = diagnose(model, h_max)
@@ -116,8 +139,13 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
             diag = None
         choice = mc_choice(model, tol, diag, "forced by method='monte-carlo'", {}, max_cost, True, seed)
     else:
-        diag = diagnose(model, h_max)
-        choice = choose(model, tol, max_cost=max_cost, diagnostics=diag, seed=seed)
+        try:
+            diag = diagnose(model, h_max)
+        except ModelError:
+            if forced:
+                raise
+            diag = None  # choose says why and plans Monte Carlo
+        choice = choose(model, tol, max_cost=max_cost, diagnostics=diag, seed=seed, mc_pilot=monte_carlo)
         if forced and method != choice.method:
             pred = predict_averaging_error(method, diag)
             if method == "exact" and not (diag.linear_damping and diag.additive_noise):
@@ -125,14 +153,18 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
             if math.isnan(pred):
                 from .choice import UnmeasuredAccuracyWarning
 
-                warnings.warn(f"method={method!r} on {diag.geometry} walls: its accuracy is not measured by the error "
-                              "model (fitted on symmetric gaps); see benchmarks/geometry_averaging.py",
-                              UnmeasuredAccuracyWarning, stacklevel=2)
+                warnings.warn(f"method={method!r} on this model ({diag.geometry} walls): its accuracy is not measured "
+                              "(no rating of benchmarks/method_ratings.py covers it); use method='fpk', which "
+                              "carries its own error estimate", UnmeasuredAccuracyWarning, stacklevel=2)
             elif pred > tol:
                 warnings.warn(f"method={method!r} is predicted to miss tol={tol:g} (expected L1 {pred:.3g})",
                               VibroWarning, stacklevel=2)
-            choice = Choice(method, f"forced by method={method!r}", pred, averaging_cost(), {},
+            settings = {"grid": fpk_grid_for(tol)} if method == "fpk" else {}
+            choice = Choice(method, f"forced by method={method!r}", pred, averaging_cost(), settings,
                             choice.predictions, diag)
+    if choice.method == "monte-carlo" and not monte_carlo and not forced:
+        raise ModelError(f"no deterministic method applies to this model ({choice.reason}); use vibro solve or "
+                         "vibro mc")
     h_max = choice.settings.get("h_max", choice.diagnostics.h_max)
     edges = np.linspace(0.0, h_max, L1_BINS + 1)
     if choice.method == "monte-carlo":
@@ -170,29 +202,96 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
         masses = masses / masses.sum()
         p = np.asarray(stats.h_density(), dtype=float)
         est = stat + bias
-        return Solution(centres, p, edges, masses, choice, time.perf_counter() - t0, est, stats)
+        return Solution(centres, p, edges, masses, choice, time.perf_counter() - t0, est, stats,
+                        f"half the L1 between two independent halves ({a.paths} paths each) plus the {s['scheme']} "
+                        f"bias constant x dt**{scheme_order(s['scheme']):g}", [("monte-carlo", dict(s), est)])
+    attempts = []
+    while True:
+        sd, estimated, source = _run_deterministic(model, choice, h_max, edges, points, warn=forced)
+        attempts.append((choice.method, dict(choice.settings), estimated))
+        if forced or estimated <= tol or time.perf_counter() - t0 > max_cost:
+            break
+        nxt = _escalate(choice, estimated, tol)
+        if nxt is None:
+            break
+        choice = nxt
+    if estimated > tol:
+        warnings.warn(f"{choice.method}: estimated L1 error {estimated:.3g} > tol={tol:g} ({source})",
+                      VibroWarning, stacklevel=2)
+    H = np.asarray(sd.H, dtype=float)
+    p = np.asarray(sd.p, dtype=float)
+    masses = sd.bin_masses(edges) if choice.method == "fpk" else bin_masses(H, p, edges)
+    return Solution(H, p, edges, masses, choice, time.perf_counter() - t0, estimated, sd, source, attempts)
+
+
+LADDER = ("paper", "jump", "chain", "fpk")
+"""The order in which ``solve`` escalates when a method's estimate misses the tolerance."""
+
+
+def _escalate(choice: Choice, estimated: float, tol: float) -> Choice | None:
+    """The next run after a miss: a finer fpk grid, or the next method of :data:`LADDER` (None: nothing left)."""
+    from .choice import FPK_GRIDS, fpk_cost, fpk_grid_for
+
+    preds = choice.predictions
+    if choice.method == "fpk":
+        grid = tuple(choice.settings["grid"])
+        if grid == FPK_GRIDS[-1]:
+            return None
+        # the estimate falls at least like the grid to the power ESTIMATE_ORDER = 1.3: the rings needed, and more
+        want = grid[0] * (estimated / (0.7 * tol)) ** (1.0 / 1.3)
+        finer = next((g for g in FPK_GRIDS if g[0] > grid[0] and g[0] >= want), FPK_GRIDS[-1])
+        return Choice("fpk", choice.reason + f"; the estimate {estimated:.3g} on grid {grid} missed tol, refined",
+                      estimated * (grid[0] / finer[0]) ** 1.3, fpk_cost(finer), {"grid": finer}, preds,
+                      choice.diagnostics)
+    if choice.method not in LADDER:
+        return None
+    for name in LADDER[LADDER.index(choice.method) + 1:]:
+        if name == "fpk":
+            grid = fpk_grid_for(tol)
+            return Choice("fpk", choice.reason + f"; {choice.method}'s estimate {estimated:.3g} missed tol, so fpk",
+                          preds.get("fpk", math.nan), fpk_cost(grid), {"grid": grid}, preds, choice.diagnostics)
+        if preds.get(name, math.nan) <= tol:
+            return Choice(name, choice.reason + f"; {choice.method}'s estimate {estimated:.3g} missed tol",
+                          preds[name], averaging_cost(), {}, preds, choice.diagnostics)
+    return None
+
+
+def _run_deterministic(model, choice: Choice, h_max: float, edges, points: int, warn: bool = False):
+    """(density, estimated L1 error on ``edges``, how it was estimated) of the chosen deterministic method; ``warn``:
+    a forced averaging method outside its validity warns (an automatic choice escalates instead)."""
     from averaging import stationary_density
     from models import Elastic
 
-    if choice.method == "exact":
-        sd = stationary_density(model.with_restitution(Elastic()), method="paper", h_max=h_max, points=2000)
-    elif choice.method == "fpk":
+    if choice.method == "fpk":
         from averaging.phase_plane import stationary_density_xy
 
-        sd = stationary_density_xy(model, h_max=h_max, points=2000)
-    else:
-        sd = stationary_density(model, method=choice.method, h_max=h_max, points=2000)
+        grid = tuple(choice.settings.get("grid", (160, 192)))
+        with warnings.catch_warnings():
+            # solve checks the estimate on its own bins and escalates; the 100-bin GridWarning is not its tolerance
+            from averaging.phase_plane import GridWarning
+
+            warnings.simplefilter("ignore", GridWarning)
+            sd = stationary_density_xy(model, grid=grid, h_max=h_max, points=points, tol=2.0)
+        return sd, sd.estimate_error(edges), f"fpk on {grid}: " + sd.error_method
+    if choice.method == "exact":
+        sd = stationary_density(model.with_restitution(Elastic()), method="paper", h_max=h_max, points=points)
+        return sd, choice.expected_error, "the Gibbs density's error from the impact-speed tail above V_C"
+    sd = stationary_density(model, method=choice.method, h_max=h_max, points=points)
     estimated = choice.expected_error
+    source = "its rating against fpk over the sweep of benchmarks/method_ratings.py"
+    if math.isnan(estimated):
+        source = "not rated for this model"
     if choice.method in ("paper", "jump"):
         # a-posteriori check against the impact-to-impact chain: warns outside the method's validity, and the
-        # measured distance (less the chain's own error) bounds the error from below
-        from .choice import CHAIN_L1_ERROR, averaging_cross_check
+        # measured distance less the chain's own rated error bounds the error from below
+        from .choice import averaging_cross_check
 
-        cross = averaging_cross_check(model, sd, choice.expected_error,
+        chain_err = predict_averaging_error("chain", choice.diagnostics)
+        cross = averaging_cross_check(model, sd, choice.expected_error, warn=warn,
                                       remedy="use method fpk (or vibro pdf --method chain)")
         if cross is not None and not cross.valid:
-            estimated = max(estimated, cross.l1 - CHAIN_L1_ERROR) if math.isfinite(estimated) else cross.l1
-    H = np.asarray(sd.H, dtype=float)
-    p = np.asarray(sd.p, dtype=float)
-    return Solution(H, p, edges, bin_masses(H, p, edges), choice, time.perf_counter() - t0, estimated, sd)
-
+            floor = cross.l1 - (chain_err if math.isfinite(chain_err) else 0.0)
+            if not floor <= estimated:
+                estimated = floor
+                source = "the L1 distance to the impact-to-impact chain less the chain's rating"
+    return sd, estimated, source
