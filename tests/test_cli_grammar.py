@@ -81,3 +81,13 @@ def test_an_automaton_is_refused_by_oscillator_commands_in_one_line(model_file, 
 def test_a_factory_returning_no_model_is_refused(model_file, capsys):
     assert main(["pdf", "--model", "m.py:nothing", "--out", "p.csv"]) == 2
     assert "returned 'int', not a model" in capsys.readouterr().err
+
+
+def test_solve_takes_h_max_like_pdf_and_mc(tmp_path, capsys):
+    import pandas as pd
+
+    out = tmp_path / "p.csv"
+    assert main(["solve", "--tol", "0.05", "--h-max", "6", "--out", str(out)]) == 0
+    assert pd.read_csv(out)["H"].max() == pytest.approx(6.0)
+    assert main(["solve", "--h-max", "-1"]) == 2
+    assert "--h-max -1 must be a finite positive energy" in capsys.readouterr().err

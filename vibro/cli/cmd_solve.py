@@ -43,6 +43,9 @@ def register(subparsers) -> None:
     p.add_argument("--method", default="auto", choices=list(SOLVE_METHODS),
                    help="force a method (default: auto, the choice above); a forced method is run once, "
                         "without escalation, and warns when its estimate misses --tol")
+    p.add_argument("--h-max", type=float, default=None, dest="h_max",
+                   help="upper energy of p(H) (default: chosen from the model, where the density's tail is "
+                        "negligible; raise it where a warning says the tail is cut)")
     p.add_argument("--max-cost", type=float, default=600.0, dest="max_cost",
                    help="wall-time budget of Monte Carlo in seconds (default 600)")
     p.add_argument("--seed", type=int, default=1,
@@ -64,6 +67,8 @@ def run(args) -> int:
     from .common import model_from_args
 
     check_request(args.tol, args.max_cost)  # before any output: bad input gives one line
+    if args.h_max is not None and not (math.isfinite(args.h_max) and args.h_max > 0):
+        raise ParameterError(f"--h-max {args.h_max:g} must be a finite positive energy")
     if args.out is not None:
         from .common import output_plan
 
@@ -78,7 +83,11 @@ def run(args) -> int:
     if args.dry_run:
         if args.method != "auto":
             raise ParameterError("--dry-run reports the automatic choice; drop --method")
-        print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False).summary())
+        from vibro.solve import diagnose
+
+        diag = diagnose(model, args.h_max)
+        print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False,
+                     diagnostics=diag).summary())
         return 0
     from vibro.cli import progress_mode
 
@@ -87,7 +96,7 @@ def run(args) -> int:
         print(f"vibro solve: choosing and running a method for tol {args.tol:g} (Monte Carlo budget "
               f"{args.max_cost:g} s)", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    sol = solve(model, args.tol, method=args.method, max_cost=args.max_cost, seed=args.seed,
+    sol = solve(model, args.tol, method=args.method, max_cost=args.max_cost, seed=args.seed, h_max=args.h_max,
                 progress=mode == "bars")
     if mode == "lines":
         print(f"vibro solve: {sol.method} done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
@@ -115,7 +124,8 @@ def run(args) -> int:
                    "estimated_error": sol.estimated_error, "estimate_source": sol.estimate_source,
                    "predictions": sol.choice.predictions,
                    "attempts": [{"method": m, "settings": st, "estimate": e} for m, st, e in sol.attempts]}
-        settings = {"tol": args.tol, "max_cost": args.max_cost, "seed": args.seed, "forced_method": args.method,
+        settings = {"tol": args.tol, "h_max_requested": args.h_max, "max_cost": args.max_cost, "seed": args.seed,
+                    "forced_method": args.method,
                     **sol.choice.settings}
         side = write_sidecar(path, record("solve", model=model, settings=settings, results=results, started=t0))
         print(f"wrote {path} and {side}")
