@@ -10,6 +10,9 @@ import time
 
 from hybrid.errors import ParameterError
 
+SPECTRUM_GRID = (80, 96)
+"""averaging.phase_plane.spectrum.SPECTRUM_GRID, spelt out: building the parser must not import scipy or sympy."""
+
 
 def register(subparsers) -> None:
     """Add the ``spectrum`` subcommand.
@@ -21,8 +24,6 @@ def register(subparsers) -> None:
     >>> args.observable, args.method, args.omega_max
     ('x', 'fpk', 3.0)
     """
-    from averaging.phase_plane.spectrum import SPECTRUM_GRID
-
     from .common import add_model_arguments
 
     p = subparsers.add_parser(
