@@ -183,6 +183,14 @@ def test_api_methods_and_refusals():
         first_passage_fpk(m, "abs(x) < 5", grid=(20, 32), h_max=1.0, check=False)
 
 
+def test_cli_defaults_are_the_librarys():
+    from averaging.phase_plane import passage, spectrum
+    from vibro.cli import cmd_passage, cmd_spectrum
+
+    assert cmd_passage.PASSAGE_GRID == passage.PASSAGE_GRID and cmd_passage.DEFAULT_STEPS == passage.DEFAULT_STEPS
+    assert cmd_spectrum.SPECTRUM_GRID == spectrum.SPECTRUM_GRID
+
+
 def test_cli_passage_and_spectrum_write_csv_sidecar_and_summary(tmp_path):
     from vibro.cli import main
 

@@ -118,7 +118,7 @@ def first_passage_averaged(model, domain: Domain, start, method: str = "paper", 
         raise ParameterError(f"method {method!r} averages the energy: it takes domains H < H_c only, not "
                              f"{domain.text!r}; use method='fpk'")
     if isinstance(start, str):
-        raise ParameterError(f"method {method!r} starts from a state; x0='stationary' is for method='fpk'")
+        raise ParameterError(f"method {method!r} starts from a state; the stationary start is for method fpk")
     if int(steps) != steps or steps < 10:
         raise ParameterError(f"steps={steps!r} must be an integer >= 10")
     t0 = time.perf_counter()
@@ -176,7 +176,7 @@ def first_passage_mc(model, domain: Domain, start, *, paths: int = 2000, dt: flo
     from hybrid.stochastic import simulate_first_passage
 
     if isinstance(start, str):
-        raise ParameterError("method 'mc' starts from a state; x0='stationary' is for method='fpk'")
+        raise ParameterError("method 'mc' starts from a state; the stationary start is for method fpk")
     if t_max is None:
         raise ParameterError("method 'mc' needs t_max (the end of every path; paths still inside are censored)")
     base, relation = _exit_relation(model, domain)

@@ -97,8 +97,8 @@ class Domain:
         """phi(x, y): negative inside."""
         x = np.asarray(x, dtype=float)
         y = np.asarray(y, dtype=float)
-        H = self._model.energy(x, y)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"):  # an overflowing H is +inf, outside every bounded domain
+            H = self._model.energy(x, y)
             return np.broadcast_to(np.asarray(self._f(x, y, H), dtype=float), np.broadcast_shapes(x.shape, y.shape))
 
     def contains(self, x, y):

@@ -11,6 +11,11 @@ import time
 
 from hybrid.errors import ParameterError
 
+PASSAGE_GRID = (120, 128)
+"""averaging.phase_plane.passage.PASSAGE_GRID, spelt out: building the parser must not import scipy or sympy."""
+DEFAULT_STEPS = 800
+"""averaging.phase_plane.passage.DEFAULT_STEPS, likewise."""
+
 
 def register(subparsers) -> None:
     """Add the ``passage`` subcommand.
@@ -22,8 +27,6 @@ def register(subparsers) -> None:
     >>> args.method, args.x0, args.grid
     ('fpk', [0.0, 0.0], (120, 128))
     """
-    from averaging.phase_plane.passage import DEFAULT_STEPS, PASSAGE_GRID
-
     from .common import add_model_arguments
 
     p = subparsers.add_parser(

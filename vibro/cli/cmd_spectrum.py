@@ -11,6 +11,9 @@ import time
 
 from hybrid.errors import ParameterError
 
+SPECTRUM_GRID = (80, 96)
+"""averaging.phase_plane.spectrum.SPECTRUM_GRID, spelt out: building the parser must not import scipy or sympy."""
+
 
 def register(subparsers) -> None:
     """Add the ``spectrum`` subcommand.
@@ -22,8 +25,6 @@ def register(subparsers) -> None:
     >>> args.observable, args.method, args.omega_max
     ('x', 'fpk', 3.0)
     """
-    from averaging.phase_plane.spectrum import SPECTRUM_GRID
-
     from .common import add_model_arguments
 
     p = subparsers.add_parser(
@@ -44,7 +45,9 @@ def register(subparsers) -> None:
     p.add_argument("--refine", type=int, default=100,
                    help="more frequencies over five half-power widths either side of the peak")
     p.add_argument("--grid", type=int, nargs=2, default=SPECTRUM_GRID, metavar=("NH", "NPHI"),
-                   help="rings and angle cells per ring; cost per frequency ~ NH x NPHI")
+                   help="rings and angle cells per ring; one sparse LU per frequency, ~0.3 s of CPU at 80 x 96 (about "
+                        "75 s for the default frequencies), ~0.05 s at 40 x 48; L1 error ~0.015 at 80 x 96 on the "
+                        "linear oscillator, first order")
     p.add_argument("--h-max", type=float, default=4.0, dest="h_max", help="top energy of the grid (in the tail)")
     p.add_argument("--out", required=True, metavar="FILE.csv", help="CSV omega,S (atomically; required)")
     p.add_argument("--summary-json", default=None, help="also write the summary as JSON (not written if absent)")
