@@ -69,10 +69,6 @@ def next_normal(s0, s1, s2, s3, zx, zk, zf):
     """A standard normal by the ziggurat method and the new state: ``(z, s0, s1, s2, s3)``.
 
     ``zx, zk, zf`` are the tables from :func:`ziggurat_tables` (layer edges, accept ratios, densities).
-    Only the first draw and its rectangle test (about 99 % of normals) are inlined into the caller, written out
-    flat: numba inlines at the level of its IR, and each inlined call (the whole ziggurat with its tail and wedge,
-    and the xoshiro steps it calls) cost about a second of compile time per call site. The rest is
-    :func:`_normal_rejected`, compiled once and cached on disk; the numbers are those of the whole loop.
 
     Examples
     --------
@@ -82,30 +78,14 @@ def next_normal(s0, s1, s2, s3, zx, zk, zf):
     >>> bool(abs(z) < 10)
     True
     """
-    # next_u64 written out (the same operations)
-    b = s1 * np.uint64(5)
-    b = ((b << np.uint64(7)) | (b >> np.uint64(57))) * np.uint64(9)
-    t = s1 << np.uint64(17)
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    s3 = (s3 << np.uint64(45)) | (s3 >> np.uint64(19))
-    i = np.int64(b & np.uint64(255))
-    neg = (b >> np.uint64(8)) & np.uint64(1)
-    u = (b >> np.uint64(11)) * _U53
-    z = u * zx[i]
-    if u < zk[i]:  # inside the rectangle: about 99 % of draws
-        return (-z if neg else z), s0, s1, s2, s3
-    return _normal_rejected(i, neg, z, s0, s1, s2, s3, zx, zk, zf)
-
-
-@nb.njit(cache=True)
-def _normal_rejected(i, neg, z, s0, s1, s2, s3, zx, zk, zf):
-    """The ziggurat after a draw ``(i, neg, z)`` outside its layer's rectangle: the tail or the wedge test, and
-    new draws until one is accepted (:func:`next_normal` is the whole method)."""
     while True:
+        b, s0, s1, s2, s3 = next_u64(s0, s1, s2, s3)
+        i = np.int64(b & np.uint64(255))
+        neg = (b >> np.uint64(8)) & np.uint64(1)
+        u = (b >> np.uint64(11)) * _U53
+        z = u * zx[i]
+        if u < zk[i]:  # inside the rectangle: about 99 % of draws
+            return (-z if neg else z), s0, s1, s2, s3
         if i == 0:  # base layer beyond r: sample the tail (Marsaglia 1964)
             r = zx[1]
             while True:
@@ -118,13 +98,6 @@ def _normal_rejected(i, neg, z, s0, s1, s2, s3, zx, zk, zf):
                     return (-z if neg else z), s0, s1, s2, s3
         u2, s0, s1, s2, s3 = next_uniform(s0, s1, s2, s3)
         if zf[i] + u2 * (zf[i + 1] - zf[i]) < math.exp(-0.5 * z * z):  # wedge
-            return (-z if neg else z), s0, s1, s2, s3
-        b, s0, s1, s2, s3 = next_u64(s0, s1, s2, s3)
-        i = np.int64(b & np.uint64(255))
-        neg = (b >> np.uint64(8)) & np.uint64(1)
-        u = (b >> np.uint64(11)) * _U53
-        z = u * zx[i]
-        if u < zk[i]:
             return (-z if neg else z), s0, s1, s2, s3
 
 
