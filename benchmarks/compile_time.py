@@ -1,7 +1,7 @@
 """Cold compile time of the Monte Carlo kernels named in issue 22, each in a fresh process with empty caches.
 
     python benchmarks/compile_time.py            # the three kernels, 3 fresh processes each (about a minute)
-    python benchmarks/compile_time.py --reps 1
+    python benchmarks/compile_time.py --reps 1 --functions   # and each numba function's own compile time
 
 Kernels: Example 1 (``simulate_ensemble(DuffingImpact(Ma(0.4)), "milstein")``, the automaton kernel's symplectic
 scheme), the impact pair with ``splitting`` and a forced linear oscillator with phase sections (``splitting``,
@@ -36,20 +36,23 @@ from hybrid.stochastic import simulate_automaton, simulate_ensemble
 from models import DuffingImpact, ImpactOscillator, Ma, automata
 
 compiles = []
-depth = [0, 0.0, 0.0]
+stack = []  # per open compile: [start wall, start cpu, cpu of the compiles nested in it]
+own = {{}}  # function name -> cpu s of its own compiles, without the functions compiled on the way
 
 
 class Listener(event.Listener):
     def on_start(self, ev):
-        if depth[0] == 0:
-            depth[1], depth[2] = time.perf_counter(), time.process_time()
-        depth[0] += 1
+        stack.append([time.perf_counter(), time.process_time(), 0.0])
 
     def on_end(self, ev):
-        depth[0] -= 1
-        if depth[0] == 0:
-            compiles.append((ev.data["dispatcher"].py_func.__name__, time.perf_counter() - depth[1],
-                             time.process_time() - depth[2]))
+        w0, c0, nested = stack.pop()
+        cpu = time.process_time() - c0
+        name = ev.data["dispatcher"].py_func.__name__
+        own[name] = own.get(name, 0.0) + cpu - nested
+        if stack:
+            stack[-1][2] += cpu
+        else:
+            compiles.append((name, time.perf_counter() - w0, cpu))
 
 
 event.register("numba:compile", Listener())
@@ -70,7 +73,7 @@ else:
                        **{{**small, "t_end": 11.0}})  # at least one forcing period (4.8) sampled
 wall, cpu = time.perf_counter() - w0, time.process_time() - c0
 print(json.dumps(dict(wall=wall, cpu=cpu, numba_wall=sum(c[1] for c in compiles),
-                      numba_cpu=sum(c[2] for c in compiles), functions=[c[0] for c in compiles])))
+                      numba_cpu=sum(c[2] for c in compiles), functions=[c[0] for c in compiles], own=own)))
 """
 
 CASES = ("example1-milstein", "impact-pair-splitting", "forced-phases")
@@ -92,6 +95,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=3, help="fresh processes per kernel (default 3)")
     ap.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
+    ap.add_argument("--functions", action="store_true", help="also each numba function's own compile time")
     args = ap.parse_args()
     print("kernel                   first run wall / cpu (s)   numba compiles wall / cpu (s)   top-level functions")
     medians = []
@@ -103,6 +107,9 @@ def main():
               f"{med['numba_cpu']:6.2f}                {', '.join(runs[0]['functions'])}")
         cpus = ", ".join(f"{r['cpu']:.2f}" for r in runs)
         print(f"{'':24s} runs (cpu): {cpus}")
+        if args.functions:  # each function's own compile, without those it compiles on the way (first run)
+            own = sorted(runs[0]["own"].items(), key=lambda kv: -kv[1])
+            print(f"{'':24s} own cpu s: " + ", ".join(f"{name} {sec:.2f}" for name, sec in own if sec >= 0.05))
     print(f"median over kernels of the median first-run cpu time: {statistics.median(medians):.2f} s")
 
 
