@@ -141,6 +141,17 @@ def test_same_seed_and_chunks_give_the_same_numbers_on_any_thread_count():
     assert np.all(np.isfinite(a.event_log[:, :, 0])) and np.all(np.diff(a.event_log[:, :, 0], axis=1) > 0)
 
 
+def test_chunk_paths_are_chosen_from_paths_and_steps_and_shown_in_the_settings():
+    # many short paths: chunks of 64 paths (at least 64 chunks), not 512 chunks of 8; few long paths: 8 lanes
+    kw = dict(dt=0.02, t_burn=0.0, x0=(0.5, 0.0), seed=5, histograms={"H": (0.0, 4.0, 20)})
+    many = simulate_automaton(equilibrium_stop_automaton(), "splitting", paths=4096, t_end=2.0, **kw)
+    assert many.settings["chunk_paths"] == 64 and len(many.chunk_samples) == 64
+    given = simulate_automaton(equilibrium_stop_automaton(), "splitting", paths=4096, t_end=2.0, chunk_paths=64, **kw)
+    assert np.array_equal(many.counts["H"], given.counts["H"]) and np.array_equal(many.chunk_sums, given.chunk_sums)
+    few = simulate_automaton(equilibrium_stop_automaton(), "splitting", paths=12, t_end=40.0, **kw)
+    assert few.settings["chunk_paths"] == 1  # under 64 paths: 8 chunks or more, as before
+
+
 def test_checkpoint_resume_and_dask_give_the_thread_numbers_bitwise(tmp_path):
     from hybrid.errors import CheckpointError
     from hybrid.stochastic import _auto_exec

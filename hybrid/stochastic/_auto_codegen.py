@@ -613,11 +613,25 @@ _sum{o} += _v"""
 
 
 def source_hash(src: str) -> str:
-    """Short hash of a generated source (the cache key, with the numba and numpy versions)."""
+    """Short hash of a generated source text alone (the tests pin some kernels' sources by it)."""
     import numba as nb
     import numpy as np
 
     return hashlib.sha256((src + nb.__version__ + np.__version__).encode()).hexdigest()[:16]
+
+
+def kernel_key(src: str) -> str:
+    """The kernel's cache key: its source, the source of every project module it imports (the random-number
+    generator, shared helpers: numba's disk cache does not look at them) and the numba and numpy versions.
+
+    Examples
+    --------
+    >>> len(kernel_key("import math"))
+    16
+    """
+    from ._codegen import dependency_hash
+
+    return hashlib.sha256((source_hash(src) + dependency_hash(src)).encode()).hexdigest()[:16]
 
 
 _TEMPLATE = '''\

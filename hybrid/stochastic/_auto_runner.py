@@ -25,7 +25,13 @@ from hybrid.sizes import check_limit, check_size
 from . import _auto_codegen, _auto_exec, _rng
 from ._auto_exec import COUNT_NAMES
 from ._codegen import load_source
-from ._runner import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, check_chunk_count
+from ._runner import (
+    CHATTER_IMPACTS_PER_STEP,
+    MAX_PATH_STEPS,
+    ChatteringWarning,
+    check_chunk_count,
+    default_chunk_paths,
+)
 from ._statistics import Estimate, ratio_estimate
 
 
@@ -409,7 +415,7 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     n_log = _as_count("events", events, "the events kept per path; 0: none")
     if n_log > 10**6:
         raise ParameterError(f"events={n_log} keeps more than 1e6 events per path; keep fewer")
-    module, _ = load_source(f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}", src)
+    module, _ = load_source(f"vibro_auto_{scheme}_{_auto_codegen.kernel_key(src)}", src)
     out = np.empty((dws.shape[0], n))
     elog = np.full((dws.shape[0], n_log, 3), np.nan)
     nlog = np.zeros(dws.shape[0], dtype=np.int64)
@@ -444,7 +450,7 @@ def _as_int(name, value):
 def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, t_end: float, x0,
                        t_burn: float = 0.0, mode0: str | None = None, params: dict | None = None, seed: int,
                        observables: dict | None = None, histograms: dict | None = None, joint=None,
-                       speed_range: tuple = (0.0, 10.0, 100), stride: int = 1, chunk_paths: int = 8,
+                       speed_range: tuple = (0.0, 10.0, 100), stride: int = 1, chunk_paths: int | None = None,
                        threads: int | None = None, convention: str = "stratonovich",
                        max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True, phases: int = 0,
                        period: float | None = None, scheduler=None, checkpoint=None, resume: bool = False,
@@ -487,8 +493,10 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Histogram of |d guard / dt| at each firing (lo must be 0).
     stride : int
         Statistics every ``stride`` steps.
-    chunk_paths : int
-        Paths per chunk. The same seed and chunk size give the same numbers on any number of threads.
+    chunk_paths : int, optional
+        Paths per chunk. The same seed and chunk size give the same numbers on any number of threads. Default:
+        chosen from the paths and the steps by :func:`~hybrid.stochastic._runner.default_chunk_paths` (8 for few
+        long paths, larger for many short ones) and recorded as ``settings["chunk_paths"]``.
     threads : int, optional
         Worker threads (default: the CPU count).
     convention : {'stratonovich', 'ito'}
@@ -546,7 +554,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     paths = _as_int("paths", paths)
     stride = _as_int("stride", stride)
     # one chunk holds every path when chunk_paths >= paths: same numbers, no arrays sized for absent paths
-    chunk_paths = min(_as_int("chunk_paths", chunk_paths), paths)
+    chunk_paths = min(default_chunk_paths(paths, t_end / dt) if chunk_paths is None
+                      else _as_int("chunk_paths", chunk_paths), paths)
     checkpoint_every = _as_int("checkpoint_every", checkpoint_every)
     dt_requested, phase_steps = dt, 1
     phases = _as_count("phases", phases, "0: no phase sections")
@@ -638,7 +647,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
 
     src, st = _auto_codegen.generate_source(automaton, scheme, obs, convention, summed=summed, phases=phases > 0)
     sch.check(st)
-    name = f"vibro_auto_{scheme}_{_auto_codegen.source_hash(src)}"
+    name = f"vibro_auto_{scheme}_{_auto_codegen.kernel_key(src)}"
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if resume and ckdir is None:
         raise ParameterError("resume=True needs a checkpoint directory")
@@ -676,7 +685,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                                     refuse=True, warn=True)
 
     run_id = _auto_exec.identity({
-        "source": _auto_codegen.source_hash(src), "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end,
+        "source": _auto_codegen.kernel_key(src), "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end,
         "t_burn": t_burn, "stride": stride, "seed": seed, "chunk_paths": chunk_paths, "x0": x0.tolist(),
         "mode0": mode0, "params": {k: float(v) for k, v in values.items()}, "histograms": histograms,
         "joint": joint, "speed_range": speed_range, "phases": phases, "period": period, "convention": convention,
@@ -716,7 +725,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         jres = (names[jx], names[jy], np.linspace(j_lo[0], j_lo[0] + j_bins[0] / j_scale[0], j_bins[0] + 1),
                 np.linspace(j_lo[1], j_lo[1] + j_bins[1] / j_scale[1], j_bins[1] + 1), jhist.sum(axis=0))
     settings = {"automaton": repr(automaton.states) + repr([m.name for m in automaton.modes])
-                + repr([t.name for t in st.transitions]) + _auto_codegen.source_hash(src),
+                + repr([t.name for t in st.transitions]) + _auto_codegen.kernel_key(src),
                 "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end, "t_burn": t_burn, "stride": stride,
                 "seed": seed, "chunk_paths": chunk_paths, "histograms": dict(histograms), "joint": joint,
                 "params": values, "convention": convention, "orders": sch.orders(st), "step_rule": step_rule,

@@ -10,11 +10,14 @@ V_C) as ``rprm``, so changing delta, c, D or V_C reuses the compiled kernel. The
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib
 import importlib.util
 import inspect
 import logging
 import os
+import re
 import sys
 import textwrap
 import time
@@ -670,11 +673,32 @@ def _announce_compiles(module, label: str) -> None:
 
         cache.load_overload = announcing
 _USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused
-_RNG_HASH = hashlib.sha256(inspect.getsource(_rng).encode()).hexdigest()[:8]
+_IMPORTED = re.compile(r"^\s*(?:from|import)\s+(hybrid(?:\.\w+)+)", re.MULTILINE)
+
+
+@functools.cache
+def _module_source_hash(module_name: str) -> str:
+    return hashlib.sha256(inspect.getsource(importlib.import_module(module_name)).encode()).hexdigest()
+
+
+def dependency_hash(src: str) -> str:
+    """Hash of the source of every project module that the generated source ``src`` imports (the random-number
+    generator, shared helpers).
+
+    numba's disk cache checks the generated file only, not what it imports, so a kernel's cache key must carry
+    these too: a changed generator must not load a kernel compiled with the old one.
+
+    Examples
+    --------
+    >>> dependency_hash("from hybrid.stochastic._rng import next_normal") != dependency_hash("import math")
+    True
+    """
+    parts = [name + _module_source_hash(name) for name in sorted(set(_IMPORTED.findall(src)))]
+    return hashlib.sha256("\x00".join(parts).encode()).hexdigest()[:16]
 
 
 def _module_name(model, scheme, src: str) -> str:
-    h = hashlib.sha256((src + _RNG_HASH + nb.__version__ + np.__version__).encode()).hexdigest()[:16]
+    h = hashlib.sha256((src + dependency_hash(src) + nb.__version__ + np.__version__).encode()).hexdigest()[:16]
     return f"vibro_mc_{scheme.name}_{model.fingerprint()}_{h}"
 
 
@@ -761,7 +785,7 @@ def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel
     # what identifies the computation (for checkpoints): the source (not the numba version: a resume after an
     # upgrade is allowed), the law's numbers in full precision, and a callable law's code
     identity = {
-        "kernel": hashlib.sha256((src + _RNG_HASH).encode()).hexdigest()[:32],
+        "kernel": hashlib.sha256((src + dependency_hash(src)).encode()).hexdigest()[:32],
         "law": [float.hex(v) for v in law_values] if user_law is None
         else callable_digest(model.restitution.callable),
     }

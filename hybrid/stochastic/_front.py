@@ -29,7 +29,7 @@ import sympy as sp
 from hybrid.automaton import real_symbol
 from hybrid.errors import ModelError
 
-from . import _auto_codegen, _auto_exec, _rng
+from . import _auto_codegen, _auto_exec, _codegen, _rng
 from ._statistics import COUNTS, SUMS
 
 KERNELS = ("auto", "automaton", "oscillator")
@@ -140,7 +140,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     t0 = time.perf_counter()
     auto_scheme = AUTOMATON_SCHEME_OF[scheme]
     automaton, observables, src, st = _generated(model, auto_scheme)
-    name = f"vibro_auto_{auto_scheme}_{_auto_codegen.source_hash(src)}"
+    name = f"vibro_auto_{auto_scheme}_{_auto_codegen.kernel_key(src)}"
     s = settings
     n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
     npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
@@ -169,7 +169,8 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
     # the law's numbers in full precision (they are parameters of the kernel, not in its source)
     law = [float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")]
-    identity = {"kernel": hashlib.sha256(src.encode()).hexdigest()[:32], "law": [model.restitution.spec(), *law]}
+    key = hashlib.sha256((src + _codegen.dependency_hash(src)).encode()).hexdigest()[:32]
+    identity = {"kernel": key, "law": [model.restitution.spec(), *law]}
     kern = AutomatonKernel(module, identity, time.perf_counter() - t0)
     return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
 

@@ -58,7 +58,7 @@ def register(subparsers) -> None:
                    help="CSV file for the (x, y) histogram (long form: x_lo,x_hi,y_lo,y_hi,count,density; not "
                         "written if absent)")
     p.add_argument("--xy-bins", type=int, nargs=2, default=(80, 80), metavar=("NX", "NY"), help="(x, y) bins")
-    p.add_argument("--chunk-paths", type=int, default=None, help="paths per chunk (default: 8, fewer for few paths)")
+    p.add_argument("--chunk-paths", type=int, default=None, help="paths per chunk (default: from paths and steps)")
     p.add_argument("--checkpoint", default=None, metavar="DIR", help="write a checkpoint in DIR")
     p.add_argument("--checkpoint-every", type=int, default=4, metavar="N",
                    help="checkpoint every N chunks (cuda: N launches)")

@@ -217,6 +217,7 @@ def run(args, resolved, plan) -> int:
 
     from hybrid.stochastic import atomic_write_text, simulate_automaton
     from hybrid.stochastic._auto_codegen import analyse
+    from hybrid.stochastic._runner import default_chunk_paths
     from models.automata import describe_automaton
     from vibro.provenance import noise_assumption, record, write_sidecar
 
@@ -251,7 +252,8 @@ def run(args, resolved, plan) -> int:
     x0 = tuple(args.x0) if args.x0 is not None else (0.0,) * n
     if len(x0) != n:
         raise ParameterError(f"--x0 gives {len(x0)} values for the {n} states {[s.name for s in automaton.states]}")
-    chunk = args.chunk_paths or max(1, min(8, args.paths // 8))
+    steps = args.t_end / args.dt if args.dt > 0 and math.isfinite(args.t_end / args.dt) else None
+    chunk = args.chunk_paths or default_chunk_paths(args.paths, steps)
     if isinstance(chunk, int) and chunk >= 1 and args.paths >= 1:  # bad values: simulate_automaton says why
         cells = -(-args.paths // chunk) * len(obs) * (max(b for _, _, b in hist.values()) + 2)
         # one int64 histogram row per chunk and observable

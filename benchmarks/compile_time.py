@@ -1,0 +1,117 @@
+"""Cold compile time of the Monte Carlo kernels named in issue 22, each in a fresh process with empty caches.
+
+    python benchmarks/compile_time.py            # the three kernels, 3 fresh processes each (about a minute)
+    python benchmarks/compile_time.py --reps 1 --functions   # and each numba function's own compile time
+
+Kernels: Example 1 (``simulate_ensemble(DuffingImpact(Ma(0.4)), "milstein")``, the automaton kernel's symplectic
+scheme), the impact pair with ``splitting`` and a forced linear oscillator with phase sections (``splitting``,
+``phases=8``). Each run starts a new Python with an empty ``VIBRO_CACHE_DIR`` and ``NUMBA_CACHE_DIR``, so numba
+compiles everything the kernel needs (the random-number helpers too), as on a user's first run. Printed per kernel:
+the wall time and the process CPU time (``time.process_time``: on a shared machine the wall time also counts other
+processes) of the first small run, which is almost all compile (8 paths x 300 to 1,100 steps), and of numba's
+compiles alone (numba's ``numba:compile`` events of top-level functions). The median over repetitions is what
+issue 22 budgets (at most 2 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+_CHILD = r"""
+import json, sys, time, warnings
+warnings.simplefilter("ignore")
+sys.path.insert(0, {tests!r})
+from numba.core import event
+import numpy as np
+from hybrid.stochastic import simulate_automaton, simulate_ensemble
+from models import DuffingImpact, ImpactOscillator, Ma, automata
+
+compiles = []
+stack = []  # per open compile: [start wall, start cpu, cpu of the compiles nested in it]
+own = {{}}  # function name -> cpu s of its own compiles, without the functions compiled on the way
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        stack.append([time.perf_counter(), time.process_time(), 0.0])
+
+    def on_end(self, ev):
+        w0, c0, nested = stack.pop()
+        cpu = time.process_time() - c0
+        name = ev.data["dispatcher"].py_func.__name__
+        own[name] = own.get(name, 0.0) + cpu - nested
+        if stack:
+            stack[-1][2] += cpu
+        else:
+            compiles.append((name, time.perf_counter() - w0, cpu))
+
+
+event.register("numba:compile", Listener())
+case = {case!r}
+small = dict(dt=0.01, paths=8, t_end=3.0, t_burn=1.0, seed=1)
+w0, c0 = time.perf_counter(), time.process_time()
+if case == "example1-milstein":
+    simulate_ensemble(DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0), "milstein",
+                      h_max=4.0, bins=400, **small)
+elif case == "impact-pair-splitting":
+    simulate_automaton(automata.impact_pair(), "splitting", x0=(0.0, 0.0, 0.0, 0.0),
+                       histograms={{"H": (0.0, 1.0, 50), "z": (-0.2, 0.2, 40)}}, **small)
+else:
+    m = ImpactOscillator("w0**2*x", "c*y", forcing="A*cos(W*t + phi)",
+                         parameters=dict(c=0.5, w0=1.0, W=1.3, A=0.4, phi=0.0, D=0.05), barriers=None)
+    simulate_automaton(m.to_automaton(), "splitting", x0=(0.0, 0.0), observables={{"x": "x"}},
+                       histograms={{"x": (-3.0, 3.0, 60)}}, phases=8, period=m.forcing_period,
+                       **{{**small, "t_end": 11.0}})  # at least one forcing period (4.8) sampled
+wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+print(json.dumps(dict(wall=wall, cpu=cpu, numba_wall=sum(c[1] for c in compiles),
+                      numba_cpu=sum(c[2] for c in compiles), functions=[c[0] for c in compiles], own=own)))
+"""
+
+CASES = ("example1-milstein", "impact-pair-splitting", "forced-phases")
+
+
+def cold(case: str) -> dict:
+    """One cold first run of ``case`` in a fresh process with empty kernel and numba caches."""
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "VIBRO_CACHE_DIR": str(Path(tmp) / "vibro"), "NUMBA_CACHE_DIR": str(Path(tmp) / "numba"),
+               "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        code = _CHILD.format(tests=str(ROOT / "tests"), case=case)
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+        if out.returncode:
+            sys.exit(out.stderr)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=3, help="fresh processes per kernel (default 3)")
+    ap.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
+    ap.add_argument("--functions", action="store_true", help="also each numba function's own compile time")
+    args = ap.parse_args()
+    print("kernel                   first run wall / cpu (s)   numba compiles wall / cpu (s)   top-level functions")
+    medians = []
+    for case in args.cases:
+        runs = [cold(case) for _ in range(args.reps)]
+        med = {k: statistics.median(r[k] for r in runs) for k in ("wall", "cpu", "numba_wall", "numba_cpu")}
+        medians.append(med["cpu"])
+        print(f"{case:24s} {med['wall']:6.2f} / {med['cpu']:6.2f}            {med['numba_wall']:6.2f} / "
+              f"{med['numba_cpu']:6.2f}                {', '.join(runs[0]['functions'])}")
+        cpus = ", ".join(f"{r['cpu']:.2f}" for r in runs)
+        print(f"{'':24s} runs (cpu): {cpus}")
+        if args.functions:  # each function's own compile, without those it compiles on the way (first run)
+            own = sorted(runs[0]["own"].items(), key=lambda kv: -kv[1])
+            print(f"{'':24s} own cpu s: " + ", ".join(f"{name} {sec:.2f}" for name, sec in own if sec >= 0.05))
+    print(f"median over kernels of the median first-run cpu time: {statistics.median(medians):.2f} s")
+
+
+if __name__ == "__main__":
+    main()

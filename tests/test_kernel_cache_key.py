@@ -1,0 +1,50 @@
+"""The kernel cache key covers every input of the generated code, the modules it imports included.
+
+numba's disk cache checks a generated kernel file, not the modules it imports (the random-number generator):
+a changed generator must give the kernel another name, so that no stale machine code is loaded.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import sympy as sp
+
+from hybrid import HybridAutomaton, Mode
+from hybrid.stochastic import _auto_codegen, _codegen
+
+
+def _changed_source(monkeypatch, module_name):
+    """Make ``inspect.getsource`` see one more line in ``module_name`` (and forget the hashes already taken)."""
+    real = inspect.getsource
+    monkeypatch.setattr(inspect, "getsource",
+                        lambda obj: real(obj) + ("\n# changed\n" if obj.__name__ == module_name else ""))
+    _codegen._module_source_hash.cache_clear()
+
+
+def test_a_changed_random_number_generator_changes_the_automaton_kernel_key(monkeypatch):
+    x, v = sp.symbols("x v")
+    automaton = HybridAutomaton((x, v), {"s": 0.3}, [Mode("m", (v, -x), (0, sp.Symbol("s")))])
+    src = _auto_codegen.generate_source(automaton, "em", {})[0]
+    assert "from hybrid.stochastic._rng import" in src
+    before, text = _auto_codegen.kernel_key(src), _auto_codegen.source_hash(src)
+    try:
+        _changed_source(monkeypatch, "hybrid.stochastic._rng")
+        assert _auto_codegen.kernel_key(src) != before
+        assert _auto_codegen.source_hash(src) == text  # the source itself is the same text
+    finally:
+        _codegen._module_source_hash.cache_clear()
+
+
+def test_a_changed_random_number_generator_changes_the_oscillator_kernel_name(monkeypatch):
+    from hybrid.stochastic import SCHEMES
+    from models import DuffingImpact
+
+    model = DuffingImpact()
+    src = _codegen.generate_source(model, SCHEMES["milstein"], True)[0]
+    before = _codegen._module_name(model, SCHEMES["milstein"], src)
+    try:
+        _changed_source(monkeypatch, "hybrid.stochastic._rng")
+        assert _codegen._module_name(model, SCHEMES["milstein"], src) != before
+    finally:
+        _codegen._module_source_hash.cache_clear()
