@@ -11,8 +11,8 @@ geometries of ``benchmarks/example_models.py`` (asymmetric gap, one-sided stop, 
   estimate is printed beside it (cached in ``benchmarks/data/method_choice_refs.npz``).
 
 Writes the tables to ``docs/results/method-choice.md``.
-Run: ``nice -n 10 python benchmarks/method_choice.py [--references]`` (``--references``: only the cached
-references).
+Run: ``nice -n 10 python benchmarks/method_choice.py [--references] [--only KEY,...]`` (``--references``: only
+the cached references; ``--only``: rerun those cases, keep the others' rows from benchmarks/data/method_choice.json).
 """
 
 from __future__ import annotations
@@ -103,9 +103,14 @@ def main():
     from vibro.solve import diagnose
     from vibro.solve.metrics import bin_masses
 
+    only = set(sys.argv[sys.argv.index("--only") + 1].split(",")) if "--only" in sys.argv else None
+    saved = ROOT / "benchmarks" / "data" / "method_choice.json"
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for key, label, args, model in cases():
+            if only is not None and key not in only:
+                rows += [r for r in json.loads(saved.read_text()) if r["key"] == key]
+                continue
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 h_max = diagnose(model).h_max
@@ -122,7 +127,7 @@ def main():
                 print(f"{label:42s} tol {tol:<6g} {method:18s} est {est:.2e} true {true:.2e} (ref {ref_est:.0e}) "
                       f"{wall:5.2f} s (cpu {cpu:5.2f} s) {esc}", flush=True)
     write_page(rows)
-    (ROOT / "benchmarks" / "data" / "method_choice.json").write_text(json.dumps(rows, indent=1) + "\n")
+    saved.write_text(json.dumps(rows, indent=1) + "\n")
 
 
 def write_page(rows):
