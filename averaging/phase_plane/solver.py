@@ -30,6 +30,10 @@ ESTIMATE_ORDER = 1.3
 ``benchmarks/fpk_convergence.py`` (E[H] with a wall at the equilibrium; p(H) converges at 1.4-2.2 elsewhere). The
 order observed on three grids (h, 2h, 4h) is taken where it is lower: with an inelastic stop at the equilibrium the
 40-bin L1 converges at order 0.5-0.75 on grids up to (256, 320) (successive differences 5.7e-3, 4.0e-3, 2.4e-3)."""
+EQUILIBRIUM_ORDER = 0.6
+"""Highest order assumed where an inelastic wall sits at the equilibrium (it meets the equilibrium at a corner of
+the domain): the 40-bin L1 of the linear oscillator with a stop at x = 0, r = 0.6, converges at order 0.5-0.75 from
+(48, 64) to (256, 320), while the three grids of a coarse solve can look faster (pre-asymptotic)."""
 MIN_ORDER = 0.25
 """Lowest order the estimate assumes (an observed order below it: not yet converging, estimate 5.3 L1(p_h, p_2h))."""
 
@@ -109,6 +113,7 @@ class PhaseDensity:
         self.error_method = None
         self._coarse = None  # the solves on grids twice and four times coarser, kept for estimate_error on any bins
         self._tail = 0.0
+        self._order = ESTIMATE_ORDER
         self.H = np.array([])
         self.p = np.array([])
 
@@ -140,13 +145,14 @@ class PhaseDensity:
         edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_support)
         return np.diff(self._cdf(edges))
 
-    def estimate_error(self, edges=None, order: float = ESTIMATE_ORDER) -> float:
+    def estimate_error(self, edges=None, order: float | None = None) -> float:
         """A-posteriori L1 error of p(H) on the bins ``edges`` (default 100 bins of [0, h_support]).
 
         Three grids: with d1 = L1(p_h, p_2h) and d2 = L1(p_2h, p_4h) from the solves on grids twice and four times
         coarser in both directions (kept from the check), the observed order is log2(d2 / d1); Richardson's
-        estimate of the fine grid's error is d1 / (2**p - 1) with p the observed order, but at most ``order`` (the
-        lowest the convergence study fitted, :data:`ESTIMATE_ORDER`) and at least :data:`MIN_ORDER`. Added: the
+        estimate of the fine grid's error is d1 / (2**p - 1) with p the observed order, but at most ``order``
+        (default: the lowest the convergence study fitted, :data:`ESTIMATE_ORDER`, or :data:`EQUILIBRIUM_ORDER` with
+        an inelastic wall at the equilibrium) and at least :data:`MIN_ORDER`. Added: the
         probability in the top 10 % of the range (the reflecting top at h_max moves at most that much; the model
         itself is solved without approximation).
 
@@ -163,6 +169,8 @@ class PhaseDensity:
             return float("nan")
         if edges is None:
             edges = np.linspace(0.0, self.h_support, L1_BINS + 1)
+        if order is None:
+            order = self._order
         half, quarter = self._coarse
         d1 = float(np.abs(self.bin_masses(edges) - half.bin_masses(edges)).sum())
         p = order
@@ -540,10 +548,15 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     quarter = solve_phase_plane(model, quarter_grid, h, walls, restitution, 3) if quarter_grid != coarse_grid else None
     sd._coarse = (half, quarter)
     sd._tail = tail
+    law = restitution if restitution is not None else model.restitution
+    if any(h_w == 0.0 for h_w in sd.grid.walls.values()) and not law.is_elastic:
+        order = min(order, EQUILIBRIUM_ORDER)
+    sd._order = order
     est = sd.estimate_error(order=order)
     sd.error_estimate = est
     sd.error_method = (f"three grids: L1(p on {tuple(grid)}, p on {coarse_grid}) / (2**p - 1) (Richardson), p the "
-                       f"order observed against {quarter_grid} within [{MIN_ORDER:g}, {order:g}] (the lowest fitted), "
+                       f"order observed against {quarter_grid} within [{MIN_ORDER:g}, {order:g}] (the lowest fitted "
+                       f"{'with an inelastic wall at the equilibrium' if order < ESTIMATE_ORDER else ''}), "
                        f"+ {tail:.2g} (probability in the top 10 % of [0, h_max], where the reflecting top moves it); "
                        "no model error (the full (x, y) problem is solved)")
     if est > tol:

@@ -300,10 +300,12 @@ def averaging_refusal(diag: Diagnostics) -> str | None:
 
     Examples
     --------
-    >>> from models import DuffingImpact
-    >>> averaging_refusal(diagnose(DuffingImpact())) is None
+    >>> from models import DuffingImpact, ImpactOscillator, Ma
+    >>> averaging_refusal(diagnose(DuffingImpact().with_params(c=-0.1))) is None    # self-excited, rated
     True
-    >>> "self-excited" in averaging_refusal(diagnose(DuffingImpact().with_params(c=-0.1)))
+    >>> unrated = ImpactOscillator("x + b*x**3", "c*y", noise=("sqrt(1 + x**2)",), restitution=Ma(0.4),
+    ...                            parameters={"b": 0.2, "c": -0.1, "D": 0.05, "delta": 1.0})
+    >>> "self-excited" in averaging_refusal(diagnose(unrated))     # multiplicative noise: outside the sweep
     True
     """
     from .errormodel import rating
