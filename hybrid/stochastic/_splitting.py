@@ -173,7 +173,7 @@ class _Driver:
         src, st = _auto_codegen.generate_source(self.automaton, scheme, {})
         AUTOMATON_SCHEMES[scheme].check(st)
         src += _STAGE_DRIVE  # the kernel's own event step, driven stage by stage (one module, one cache entry)
-        self._source = (f"vibro_split_{scheme}_{_auto_codegen.source_hash(src)}", src)
+        self._source = (f"vibro_split_{scheme}_{_auto_codegen.kernel_key(src)}", src)
         self._module = None
         self.level_index = [tr.name for tr in st.transitions].index("level_")
         self.mode_index = list(st.modes).index(mode)
