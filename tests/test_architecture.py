@@ -60,6 +60,9 @@ def test_cli_names_match_the_registries():
     assert names.SCHEMES == tuple(sorted(SCHEMES))
     assert names.DENSITY_METHODS == tuple(sorted(METHODS))
     assert names.MODELS == tuple(sorted(MODELS))
+    from vibro.solve.solver import METHODS as SOLVE_METHODS
+
+    assert names.SOLVE_METHODS == SOLVE_METHODS
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["--version"], ["mc", "--help"], ["pdf", "--help"],

@@ -19,9 +19,8 @@ def register(subparsers) -> None:
     >>> args.tol, args.method, args.param
     (0.05, 'auto', ['delta=0.8'])
     """
-    from vibro.solve.solver import METHODS as SOLVE_METHODS
-
     from .common import add_model_arguments
+    from .names import SOLVE_METHODS
 
     p = subparsers.add_parser(
         "solve", help="stationary p(H) by the cheapest method whose estimated error meets --tol (exact, paper, jump, "

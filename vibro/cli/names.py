@@ -11,3 +11,5 @@ DENSITY_METHODS = ("chain", "exact-two-impact", "jump", "paper")
 """Names of ``averaging.METHODS``."""
 MODELS = ("duffing", "duffing-forced", "duffing-vdp", "rayleigh")
 """Names of ``models.MODELS``."""
+SOLVE_METHODS = ("auto", "exact", "paper", "jump", "chain", "fpk", "monte-carlo")
+"""``vibro.solve.solver.METHODS``, in its order (cheapest first)."""
