@@ -61,6 +61,9 @@ class PhaseDensity:
     """
 
     method = "fpk"
+    scheme = "rings"
+    h_min = 0.0
+    """Lowest energy of p(H) (min G; 0 for a single well)."""
 
     def __init__(self, model, grid: RingGrid, disc: Discretisation, p, timing, walls):
         self.model = model
@@ -112,8 +115,8 @@ class PhaseDensity:
         0.0
         """
         H = np.asarray(H, dtype=float)
-        inside = (H >= 0) & (H <= self.h_support)
-        return np.where(inside, np.maximum(self._pdf(np.clip(H, 0, self.h_support)), 0.0), 0.0)
+        inside = (H >= self.h_min) & (H <= self.h_support)
+        return np.where(inside, np.maximum(self._pdf(np.clip(H, self.h_min, self.h_support)), 0.0), 0.0)
 
     def bin_masses(self, edges):
         """Probability of each energy bin [edges[k], edges[k+1]] (exact ring masses, monotone interpolation).
@@ -125,7 +128,7 @@ class PhaseDensity:
         >>> round(float(sd.bin_masses([0.0, 4.0]).sum()), 12)
         1.0
         """
-        edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_support)
+        edges = np.clip(np.asarray(edges, dtype=float), self.h_min, self.h_support)
         return np.diff(self._cdf(edges))
 
     # ------------------------------------------------------------------ impacts
@@ -183,6 +186,18 @@ class PhaseDensity:
         val = (1.0 - t) * self.cell_p[kk] + t * self.cell_p[np.maximum(k2, 0)]
         return np.where(inside, val, 0.0)
 
+    def box(self):
+        """((x_lo, x_hi), y_max): the rectangle of the phase plane that holds the density (H < h_support).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> sd.box()
+        ((-1.0, 1.0), 2.8284271247461903)
+        """
+        return self._x_range(), float(np.sqrt(2.0 * (self.h_support - self.h_min)))
+
     def _x_range(self):
         lo, hi = self.walls
         tl, tr = self.model.turning_points(self.h_support) if hasattr(self.model, "turning_points") else (-5, 5)
@@ -199,7 +214,7 @@ class PhaseDensity:
         True
         """
         x = np.atleast_1d(np.asarray(x, dtype=float))
-        ym = np.sqrt(2.0 * self.h_support)
+        ym = self.box()[1]
         e = np.linspace(-ym, ym, points + 1)
         yc = 0.5 * (e[1:] + e[:-1])
         return self.joint(x, yc).sum(axis=0) * (e[1] - e[0])
@@ -236,7 +251,7 @@ class PhaseDensity:
         if x is None:
             x = np.linspace(*self._x_range(), 101)
         if y is None:
-            ym = np.sqrt(2.0 * self.h_support)
+            ym = self.box()[1]
             y = np.linspace(-ym, ym, 101)
         XX, YY = np.meshgrid(x, y)
         return pd.DataFrame({"x": XX.ravel(), "y": YY.ravel(), "p": self.joint(x, y).ravel()})
