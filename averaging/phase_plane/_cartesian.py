@@ -214,7 +214,8 @@ class CartesianDiscretisation:
         lo2, hi2 = grid.cell(I, J - 1), grid.cell(I, J + 2)
         four = (lo2 >= 0) & (hi2 >= 0)
         c = hx / (2.0 * hy)
-        add_flux(a, b, (a, b), (np.where(four, 15.0 / 12.0, 1.0) * c * s2[a], -np.where(four, 15.0 / 12.0, 1.0) * c * s2[b]))
+        inner_w = np.where(four, 15.0 / 12.0, 1.0) * c
+        add_flux(a, b, (a, b), (inner_w * s2[a], -inner_w * s2[b]))
         lo2s, hi2s = np.maximum(lo2, 0), np.maximum(hi2, 0)
         add_flux(a[four], b[four], (lo2s[four], hi2s[four]),
                  (-c * s2[lo2s[four]] / 12.0, c * s2[hi2s[four]] / 12.0))
@@ -287,7 +288,9 @@ class CartesianDiscretisation:
         """(speeds at the wall, flux per incoming cell) of ``side`` for the density p."""
         J_in, _c_in, srcs, wts, flux_coef = self.walls[side]
         pf = sum(np.where(s >= 0, w * p[np.maximum(s, 0)], 0.0) for s, w in zip(srcs, wts))
-        return np.abs(self.grid.yc[J_in]), flux_coef * pf
+        v = np.abs(self.grid.yc[J_in])
+        order = np.argsort(v)
+        return v[order], (flux_coef * pf)[order]
 
 
 def critical_energies(potential, lo: float, hi: float, samples: int = 20001) -> np.ndarray:
@@ -400,7 +403,7 @@ def energy_cdf(grid, potential, p, px, py, faces, per_cell: int = 3, sampling: i
 def point_values(grid, p):
     """Point values at the cell centres from the cell averages (p - h**2/24 p'' in each direction, fourth order)."""
     out = p.copy()
-    for di, dj, h in ((1, 0, grid.hx), (0, 1, grid.hy)):
+    for di, dj in ((1, 0), (0, 1)):
         nb = grid.cell(grid.i + di, grid.j + dj)
         pb = grid.cell(grid.i - di, grid.j - dj)
         both = (nb >= 0) & (pb >= 0)

@@ -34,8 +34,12 @@ def register(subparsers) -> None:
                         "instead of at Poisson times: ~0.05 s, median L1 0.0055 on the paper's cases against jump's "
                         "0.029), or fpk (the full (x, y) Fokker-Planck problem with impact boundary conditions: "
                         "about 0.5 s, within ~0.005 of Monte Carlo)")
-    p.add_argument("--grid", type=int, nargs=2, default=(160, 192), metavar=("NH", "NPHI"),
-                   help="--method fpk: energy rings and angle cells per ring; cost ~ NH x NPHI (a sparse LU)")
+    p.add_argument("--grid", type=int, nargs=2, default=None, metavar=("N1", "N2"),
+                   help="--method fpk: energy rings and angle cells per ring (default 160 192), or with the Cartesian "
+                        "scheme cells in x and in y (default 120 120); cost ~ N1 x N2 (a sparse LU)")
+    p.add_argument("--scheme", choices=("auto", "rings", "cartesian"), default="auto",
+                   help="--method fpk: energy-angle rings (single well) or Cartesian cells (any number of wells, "
+                        "e.g. a double-well Duffing with a < 0); auto (default) picks rings for a single well")
     p.add_argument("--force", action="store_true",
                    help="compute an averaging density even where the diagnosis refuses averaging (warns instead)")
     p.add_argument("--h-max", type=float, default=4.0, dest="h_max", help="upper energy (default 4)")
@@ -133,9 +137,10 @@ def run(args: argparse.Namespace) -> int:
     if args.method == "fpk":
         from averaging.phase_plane import stationary_density_xy
 
-        if min(args.grid) < 8 or args.grid[0] * args.grid[1] > 4_000_000:
+        if args.grid is not None and (min(args.grid) < 8 or args.grid[0] * args.grid[1] > 4_000_000):
             raise ParameterError(f"--grid {args.grid[0]} {args.grid[1]}: use at least 8 and at most 4e6 cells in all")
-        sd = stationary_density_xy(model, grid=tuple(args.grid), h_max=args.h_max, points=args.points)
+        sd = stationary_density_xy(model, grid=None if args.grid is None else tuple(args.grid), h_max=args.h_max,
+                                   points=args.points, scheme=args.scheme)
     else:
         from vibro.solve import diagnose
         from vibro.solve.choice import averaging_refusal
@@ -165,9 +170,12 @@ def run(args: argparse.Namespace) -> int:
         # the box of the energies that carry the mass (h_support <= h_max), not of all of [0, h_max]
         h_box = min(args.h_max, sd.h_support)
         left, right = model.barriers
-        lo, hi = (float(v[0]) for v in turning_points(model, h_box))
+        if args.method == "fpk":  # the solver's own box (with several wells, G(x) = h has more than two roots)
+            (lo, hi), ymax = sd.box()
+        else:
+            lo, hi = (float(v[0]) for v in turning_points(model, h_box))
+            ymax = np.sqrt(2.0 * h_box)
         x = np.linspace(max(left, lo), min(right, hi), args.joint_points)
-        ymax = np.sqrt(2.0 * h_box)
         y = np.linspace(-ymax, ymax, args.joint_points)
         pxy = sd.joint(x, y)
         _check_resolved(args, sd, (x, y, pxy))
@@ -183,7 +191,8 @@ def run(args: argparse.Namespace) -> int:
                "impact_rate": sd.impact_rate, "barrier_energy": Gd if walls else None, "averaging_refusal": refusal}
     settings = {"method": args.method, "h_max": args.h_max, "points": args.points, "force": args.force}
     if args.method == "fpk":
-        settings["grid"] = list(args.grid)
+        settings["grid"] = sd.metadata()["grid"]
+        settings["scheme"] = sd.scheme
     rec = record("pdf", model=model, settings=settings, results=results, started=started)
     write_sidecar(args.out, rec)
     if args.joint is not None:  # its own record, so that vibro plot finds the barriers beside the joint CSV too
