@@ -34,7 +34,7 @@ def confining_range(potential, h_max: float, left=None, right=None, reach: float
     --------
     >>> lo, hi, gmin = confining_range(lambda x: -x**2 / 2 + x**4 / 16, 3.0)
     >>> round(hi, 6), round(gmin, 6)
-    (3.740212, -1.0)
+    (3.464102, -1.0)
     """
     def edge(sign, wall):
         if wall is not None:
@@ -298,7 +298,7 @@ def critical_energies(potential, lo: float, hi: float, samples: int = 20001) -> 
 
     Examples
     --------
-    >>> [round(float(v), 9) for v in critical_energies(lambda x: -x**2 / 2 + x**4 / 16, -3.0, 3.0)]
+    >>> [round(float(v), 9) + 0.0 for v in critical_energies(lambda x: -x**2 / 2 + x**4 / 16, -3.0, 3.0)]
     [-1.0, 0.0, -1.0]
     """
     xs = np.linspace(lo, hi, samples)
