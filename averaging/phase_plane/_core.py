@@ -361,23 +361,29 @@ class Discretisation:
 
     def solve(self):
         """The normalised null vector: one equation replaced by total mass = 1 (implied by conservation)."""
-        n = self.grid.n
-        k = int(np.argmax(np.abs(self.A.diagonal())))
-        keep = np.ones(n)
-        keep[k] = 0.0
-        A = sps.diags(keep) @ self.A + sps.csr_matrix((self.mass_weight, (np.full(n, k), np.arange(n))), shape=(n, n))
-        rhs = np.zeros(n)
-        rhs[k] = 1.0
-        A = A.tocsc()
-        # the operator is nearly symmetric in structure (a cylinder of rings plus the impact map): a minimum
-        # degree ordering of A + A^T with mild pivoting fills 3x less than COLAMD on the paper's cases
-        try:
-            p = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1).solve(rhs)
-            ok = np.all(np.isfinite(p)) and np.max(np.abs(A @ p - rhs)) < 1e-8 * max(1.0, np.max(np.abs(p)))
-        except RuntimeError:  # exactly singular with this pivoting
-            ok = False
-        if not ok:
-            p = spla.spsolve(A, rhs, permc_spec="COLAMD")
-        if not np.all(np.isfinite(p)):
-            raise NormalisationError("the discrete stationary equation is singular: no normalisable density")
-        return p
+        return null_vector(self.A, self.mass_weight)
+
+
+def null_vector(A, mass_weight):
+    """The p with A p = 0 and sum(mass_weight * p) = 1: one equation replaced by the normalisation (implied by
+    conservation), one sparse LU."""
+    n = A.shape[0]
+    k = int(np.argmax(np.abs(A.diagonal())))
+    keep = np.ones(n)
+    keep[k] = 0.0
+    A = sps.diags(keep) @ A + sps.csr_matrix((mass_weight, (np.full(n, k), np.arange(n))), shape=(n, n))
+    rhs = np.zeros(n)
+    rhs[k] = 1.0
+    A = A.tocsc()
+    # the operator is nearly symmetric in structure (a cylinder of rings plus the impact map): a minimum
+    # degree ordering of A + A^T with mild pivoting fills 3x less than COLAMD on the paper's cases
+    try:
+        p = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1).solve(rhs)
+        ok = np.all(np.isfinite(p)) and np.max(np.abs(A @ p - rhs)) < 1e-8 * max(1.0, np.max(np.abs(p)))
+    except RuntimeError:  # exactly singular with this pivoting
+        ok = False
+    if not ok:
+        p = spla.spsolve(A, rhs, permc_spec="COLAMD")
+    if not np.all(np.isfinite(p)):
+        raise NormalisationError("the discrete stationary equation is singular: no normalisable density")
+    return p

@@ -74,6 +74,9 @@ class PhaseDensity:
     """
 
     method = "fpk"
+    scheme = "rings"
+    h_min = 0.0
+    """Lowest energy of p(H) (min G; 0 for a single well)."""
 
     def __init__(self, model, grid: RingGrid, disc: Discretisation, p, timing, walls):
         self.model = model
@@ -129,8 +132,8 @@ class PhaseDensity:
         0.0
         """
         H = np.asarray(H, dtype=float)
-        inside = (H >= 0) & (H <= self.h_support)
-        return np.where(inside, np.maximum(self._pdf(np.clip(H, 0, self.h_support)), 0.0), 0.0)
+        inside = (H >= self.h_min) & (H <= self.h_support)
+        return np.where(inside, np.maximum(self._pdf(np.clip(H, self.h_min, self.h_support)), 0.0), 0.0)
 
     def bin_masses(self, edges):
         """Probability of each energy bin [edges[k], edges[k+1]] (exact ring masses, monotone interpolation).
@@ -142,7 +145,7 @@ class PhaseDensity:
         >>> round(float(sd.bin_masses([0.0, 4.0]).sum()), 12)
         1.0
         """
-        edges = np.clip(np.asarray(edges, dtype=float), 0.0, self.h_support)
+        edges = np.clip(np.asarray(edges, dtype=float), self.h_min, self.h_support)
         return np.diff(self._cdf(edges))
 
     def estimate_error(self, edges=None, order: float | None = None) -> float:
@@ -216,6 +219,18 @@ class PhaseDensity:
         XX, YY = np.meshgrid(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         return cell_values_at(self.model, self.grid, self.walls, self.cell_p, XX, YY)
 
+    def box(self):
+        """((x_lo, x_hi), y_max): the rectangle of the phase plane that holds the density (H < h_support).
+
+        Examples
+        --------
+        >>> from models import DuffingImpact
+        >>> sd = stationary_density_xy(DuffingImpact(), grid=(40, 48), check=False)
+        >>> sd.box()
+        ((-1.0, 1.0), 2.8284271247461903)
+        """
+        return self._x_range(), float(np.sqrt(2.0 * (self.h_support - self.h_min)))
+
     def _x_range(self):
         lo, hi = self.walls
         tl, tr = self.model.turning_points(self.h_support) if hasattr(self.model, "turning_points") else (-5, 5)
@@ -232,7 +247,7 @@ class PhaseDensity:
         True
         """
         x = np.atleast_1d(np.asarray(x, dtype=float))
-        ym = np.sqrt(2.0 * self.h_support)
+        ym = self.box()[1]
         e = np.linspace(-ym, ym, points + 1)
         yc = 0.5 * (e[1:] + e[:-1])
         return self.joint(x, yc).sum(axis=0) * (e[1] - e[0])
@@ -269,7 +284,7 @@ class PhaseDensity:
         if x is None:
             x = np.linspace(*self._x_range(), 101)
         if y is None:
-            ym = np.sqrt(2.0 * self.h_support)
+            ym = self.box()[1]
             y = np.linspace(-ym, ym, 101)
         XX, YY = np.meshgrid(x, y)
         return pd.DataFrame({"x": XX.ravel(), "y": YY.ravel(), "p": self.joint(x, y).ravel()})
@@ -277,7 +292,7 @@ class PhaseDensity:
     def metadata(self) -> dict:
         """Method, model, grid and summary statistics (JSON-friendly)."""
         return {
-            "method": self.method, "model": self.model.describe(), "h_max": self.h_max,
+            "method": self.method, "scheme": self.scheme, "model": self.model.describe(), "h_max": self.h_max,
             "grid": [int(self.grid.n_rings), int(round((2 * np.pi) / self.grid.dpsi))], "cells": int(self.grid.n),
             "walls": list(self.walls), "mean_energy": self.mean_energy, "mean_x2": self.mean_x2,
             "prob_below_barrier": self.prob_below_barrier, "impact_rate": self.impact_rate,
@@ -429,6 +444,11 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
     return out
 
 
+def _l1_bins(a: PhaseDensity, b: PhaseDensity, bins: int = L1_BINS) -> float:
+    edges = np.linspace(a.h_min, a.h_support, bins + 1)
+    return float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
+
+
 FIT_TAIL = 1e-8
 """The ring mass left above the range :func:`stationary_density_xy` fits to the density (see ``h_max`` there)."""
 
@@ -457,20 +477,42 @@ def _mass_energy(sd: PhaseDensity) -> float:
     """The energy (a ring face) below which all but :data:`FIT_TAIL` of the probability lies."""
     above = 1.0 - np.cumsum(sd.ring_mass) / sd.ring_mass.sum()
     k = int(np.argmax(above <= FIT_TAIL)) if np.any(above <= FIT_TAIL) else len(above) - 1
-    return float(sd.grid.H_faces[k + 1])
+    return float(sd.H_faces[k + 1])
 
 
-def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls="model", restitution=None,
+SCHEMES = ("auto", "rings", "cartesian")
+"""Discretisations of :func:`stationary_density_xy`: energy-angle rings (one well), Cartesian cells (any number
+of wells), or ``auto``: rings for a single well, Cartesian cells otherwise."""
+
+
+def is_single_well(model) -> bool:
+    """True when x g(x) > 0 between the model's walls (one closed orbit per energy, the rings apply).
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> is_single_well(ImpactOscillator("-x + x**3/4", parameters={"D": 0.5}, barriers=None))
+    False
+    """
+    try:
+        model.check_single_well()
+    except ModelError:
+        return False
+    return True
+
+
+def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model", restitution=None,
                           points: int = 2000, check: bool = True, tol: float = 0.005,
-                          order: float = ESTIMATE_ORDER) -> PhaseDensity:
+                          order: float | None = None, scheme: str = "auto") -> PhaseDensity:
     """Stationary density p(x, y) of ``model`` with impact boundary conditions, and p(H), marginals, impacts.
 
     Parameters
     ----------
     model : ImpactOscillator
-        Any g (single well), h, f_k / D_kl and restitution law; walls from the model or ``walls``.
-    grid : (int, int)
-        (rings in H, angle cells per ring); the cost grows like their product (about 1 s per 30 000 cells).
+        Any confining g (one well or several), h, f_k / D_kl and restitution law; walls from the model or ``walls``.
+    grid : (int, int) or None
+        Rings: (rings in H, angle cells per ring), default :data:`DEFAULT_GRID`; Cartesian: (cells in x, cells in
+        y), default ``CARTESIAN_GRID``. The cost grows like their product (about 1 s per 30 000 cells).
     h_max : float
         Upper end of the energy range (reflecting); mass above it is lost, so choose it in the tail. Where all but
         :data:`FIT_TAIL` of the mass lies below h_max / 4, the rings are fitted to the mass instead (solved again on
@@ -485,8 +527,12 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
         it exceeds ``tol``.
     tol : float
         Target L1 error of p(H) on 100 bins for the grid check.
-    order : float
-        Convergence order assumed by the estimate (default :data:`ESTIMATE_ORDER`, the lowest fitted one).
+    order : float, optional
+        Convergence order assumed by the estimate (default: :data:`ESTIMATE_ORDER`, the lowest fitted one, on
+        rings; 2 on Cartesian cells).
+    scheme : {'auto', 'rings', 'cartesian'}
+        ``auto``: energy-angle rings for a single well, Cartesian finite volumes (:mod:`.cartesian`) for several
+        wells (a double-well Duffing); p(H) then starts at min G < 0.
 
     Returns
     -------
@@ -495,8 +541,10 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     Raises
     ------
     NormalisationError
-        When the potential does not confine (no single well) or the density does not decay towards h_max
-        (energy grows without bound, or h_max far too small).
+        When the density does not decay towards h_max (energy grows without bound, or h_max far too small), or
+        ``scheme='rings'`` is asked for a potential with several wells.
+    ModelError
+        When the potential does not confine the motion (no wall and G does not grow on a side).
 
     Examples
     --------
@@ -505,11 +553,22 @@ def stationary_density_xy(model, grid=DEFAULT_GRID, h_max: float = 4.0, *, walls
     >>> list(sd.to_pandas().columns), round(float(sd.bin_masses([0, 4.0])[0]), 9)
     (['H', 'p'], 1.0)
     """
+    if scheme not in SCHEMES:
+        raise ParameterError(f"scheme={scheme!r}; use one of {', '.join(SCHEMES)}")
+    if scheme == "auto":
+        scheme = "rings" if is_single_well(model) else "cartesian"
+    if scheme == "cartesian":
+        from .cartesian import stationary_density_cartesian
+
+        return stationary_density_cartesian(model, grid, h_max, walls=walls, restitution=restitution, points=points,
+                                            check=check, tol=tol, order=2.0 if order is None else order)
+    grid = DEFAULT_GRID if grid is None else grid
+    order = ESTIMATE_ORDER if order is None else order
     if check:
         try:
             model.check_single_well()
         except ModelError as exc:
-            raise NormalisationError(f"no stationary density: {exc}") from exc
+            raise NormalisationError(f"no stationary density on rings: {exc}; use scheme='cartesian'") from exc
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     check_energy_range(model, float(h_max), walls)

@@ -45,9 +45,13 @@ def register(subparsers) -> None:
                         "included), paper, exact-two-impact, jump, chain or fpk (see above)")
     p.add_argument("--tol", type=float, default=PDF_TOL,
                    help=f"--method auto: target L1 distance of p(H) on 40 bins (default {PDF_TOL})")
-    p.add_argument("--grid", type=int, nargs=2, default=None, metavar=("NH", "NPHI"),
-                   help="--method fpk: energy rings and angle cells per ring; cost ~ NH x NPHI (a sparse LU); default "
-                        "160 192, and 120 128 for a forced model")
+    p.add_argument("--grid", type=int, nargs=2, default=None, metavar=("N1", "N2"),
+                   help="--method fpk: energy rings and angle cells per ring (default 160 192; 120 128 for a forced "
+                        "model), or with the Cartesian scheme cells in x and in y (default 120 120); cost ~ N1 x N2 "
+                        "(a sparse LU)")
+    p.add_argument("--scheme", choices=("auto", "rings", "cartesian"), default="auto",
+                   help="--method fpk: energy-angle rings (single well) or Cartesian cells (any number of wells, "
+                        "e.g. a double-well Duffing with a < 0); auto (default) picks rings for a single well")
     p.add_argument("--phases", type=int, default=0, metavar="N",
                    help="--method fpk, forced models: also write p(H), p(x) and p(y) at the N phases k T / N of the "
                         "forcing period, in the columns of vibro mc --phases (--phases-out)")
@@ -277,8 +281,10 @@ def run(args: argparse.Namespace) -> int:
     elif args.method == "fpk":
         from averaging.phase_plane import stationary_density_xy
 
-        args.grid = _grid(args, (160, 192))
-        sd = stationary_density_xy(model, grid=tuple(args.grid), h_max=args.h_max, points=args.points)
+        if args.grid is not None:
+            _grid(args, None)  # the size check
+        sd = stationary_density_xy(model, grid=None if args.grid is None else tuple(args.grid), h_max=args.h_max,
+                                   points=args.points, scheme=args.scheme)
     else:
         from vibro.solve import diagnose
         from vibro.solve.choice import averaging_refusal
@@ -307,9 +313,12 @@ def run(args: argparse.Namespace) -> int:
         # the box of the energies that carry the mass (h_support <= h_max), not of all of [0, h_max]
         h_box = min(args.h_max, sd.h_support)
         left, right = model.barriers
-        lo, hi = (float(v[0]) for v in turning_points(model, h_box))
+        if args.method == "fpk":  # the solver's own box (with several wells, G(x) = h has more than two roots)
+            (lo, hi), ymax = sd.box()
+        else:
+            lo, hi = (float(v[0]) for v in turning_points(model, h_box))
+            ymax = np.sqrt(2.0 * h_box)
         x = np.linspace(max(left, lo), min(right, hi), args.joint_points)
-        ymax = np.sqrt(2.0 * h_box)
         y = np.linspace(-ymax, ymax, args.joint_points)
         pxy = sd.joint(x, y)
         _check_resolved(args, sd, (x, y, pxy))
@@ -329,7 +338,8 @@ def run(args: argparse.Namespace) -> int:
         results.update(chosen_method=chosen.method, reason=chosen.choice.reason,
                        estimated_error=chosen.estimated_error, estimate_source=chosen.estimate_source)
     if args.method == "fpk":
-        settings["grid"] = list(args.grid)
+        settings["grid"] = sd.metadata()["grid"]
+        settings["scheme"] = sd.scheme
     elif chosen is not None and "grid" in chosen.choice.settings:
         settings["grid"] = list(chosen.choice.settings["grid"])
     rec = record("pdf", model=model, settings=settings, results=results, started=started)
