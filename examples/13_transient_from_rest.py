@@ -39,7 +39,7 @@ def exact_linear(c: float, D: float, t: float) -> float:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer paths (a smoke run)")
     parser.add_argument("--outdir", default=None, help="folder for the figure (default: a new temporary folder)")
     args = parser.parse_args(argv)
