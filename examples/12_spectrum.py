@@ -1,8 +1,9 @@
 """Power spectral density of the displacement from the phase-plane generator's resolvent.
+======================================================================================
 
 S(omega) is one-sided, normalised so that its integral over (0, inf) is the variance: one complex sparse solve of
 (i omega M + A) per frequency, A the phase-plane solver's operator with its impact boundary. The free linear
-oscillator checks it against |H(omega)|^2 2D/pi; Example 1 (Duffing with walls at +-1, Ma V_C = 0.4) then gives its
+oscillator checks it against ``|H(omega)|^2 2D/pi``; Example 1 (Duffing with walls at +-1, Ma V_C = 0.4) then gives its
 peak frequency, half-power bandwidth and the variance check.
 
 Run:  python examples/12_spectrum.py [--quick]   (headless; exits 1 if a check fails)

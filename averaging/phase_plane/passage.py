@@ -278,8 +278,8 @@ class FirstPassage:
 
 # --------------------------------------------------------------------------------------------------- crossings
 def crossing_rate(sd, level: float, direction: int = 1, points: int = 4001) -> float:
-    """Rice's rate of crossings of x = ``level`` from the joint density: nu+(b) = int_0^inf y p(b, y) dy
-    (``direction=1``, upwards) or int_-inf^0 |y| p(b, y) dy (``-1``), per unit time.
+    """Rice's rate of crossings of x = ``level`` from the joint density: ``nu+(b) = int_0^inf y p(b, y) dy``
+    (``direction=1``, upwards) or ``int_-inf^0 |y| p(b, y) dy`` (``-1``), per unit time.
 
     Parameters
     ----------
