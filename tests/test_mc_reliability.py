@@ -248,7 +248,8 @@ def test_too_many_chunks_are_refused_before_seeding_them():
     from hybrid.stochastic import simulate_automaton
     from models import DuffingImpact as Model
 
-    kw = dict(dt=0.01, paths=10**8, t_end=0.1, t_burn=0.0, xy_bins=None, check_dt=False)
+    # chunks of 8 asked for (the automatic choice would take chunks large enough to stay under the limit)
+    kw = dict(dt=0.01, paths=10**8, t_end=0.1, t_burn=0.0, xy_bins=None, check_dt=False, chunk_paths=8)
     start = time.perf_counter()
     with pytest.raises(ParameterError, match=r"chunks, above the limit .*chunk_paths >= 96") as info:
         simulate_ensemble(Model(), "milstein", **kw)

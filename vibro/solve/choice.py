@@ -278,6 +278,11 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
         reasons.append(f"no averaging method is rated within tol={tol:g} ({rated})")
     grid = fpk_grid_for(tol)
     preds["fpk"] = fpk_typical() * (160.0 / grid[0]) ** FPK_PREDICT_ORDER
+    if grid == FPK_GRIDS[-1] and preds["fpk"] > 2.0 * tol:
+        # even the finest grid is predicted well above tol: only Monte Carlo is left, planned for tol (and refused
+        # with its size estimate where that is absurd), rather than a run that is known to miss
+        reasons.append(f"fpk's finest grid {grid} is predicted at {preds['fpk']:.2g}, above tol={tol:g}")
+        return mc_choice(model, tol, diag, "; ".join(reasons), preds, max_cost, mc_pilot, seed)
     why = "; ".join(reasons) + (f"; the phase-plane FPK solver (impacts as boundary conditions) on grid {grid} "
                                 "carries its own three-grid error estimate")
     return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
