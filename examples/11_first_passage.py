@@ -43,8 +43,35 @@ def main(quick: bool) -> int:
         k = int(np.argmin(np.abs(df.t - frac * level.mean_time)))
         print(f"  t = {df.t[k]:8.3f}   R = {df.R[k]:.4f}   Poisson exp(-nu t) = {df.R_poisson[k]:.4f}")
     ok &= level.R[0] == 1.0 and np.all(np.diff(level.R) <= 1e-6)  # BDF2 is monotone only to ~1e-9 here
+    plot(fpk, paper, jump, level, H_c)
     print("OK" if ok else "FAILED")
     return 0 if ok else 1
+
+
+def plot(fpk, paper, jump, level, H_c) -> None:
+    """The survival of the last energy level by the three methods, and R(t) of |x| < 0.9 beside its Poisson estimate."""
+    import tempfile
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    for r, style in ((fpk, "k-"), (paper, "--"), (jump, ":")):
+        a.plot(r.t, r.R, style, label=f"{r.method}: mean {r.mean_time:.1f}")
+    a.set(xlabel="t", ylabel="R(t) = P(T > t)", title=f"Example 1 from rest, H < {H_c:g}")
+    a.legend()
+    df = level.to_pandas()
+    b.plot(df.t, df.R, "k-", label="fpk")
+    b.plot(df.t, df.R_poisson, "--", label="Poisson, Rice's out-crossing rate")
+    b.set(xlabel="t", ylabel="R(t)", title="|x| < 0.9")
+    b.legend()
+    fig.tight_layout()
+    out = Path(tempfile.mkdtemp(prefix="vibro-example-11-")) / "11_first_passage.png"
+    fig.savefig(out, dpi=100)
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -33,8 +33,34 @@ def main(quick: bool) -> int:
     print(f"  peak omega {duff.peak_omega:.5f}, half-power bandwidth {duff.bandwidth:.4f}, "
           f"int_0^3 S = {duff.integral:.6f} of Var = {duff.variance:.6f}")
     ok &= abs(duff.variance_check - 1) < 0.02
+    plot(s, exact, duff)
     print("OK" if ok else "FAILED")
     return 0 if ok else 1
+
+
+def plot(s, exact, duff) -> None:
+    """The linear oscillator's spectrum against its closed form, and Example 1's."""
+    import tempfile
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    a.plot(s.omega, exact, "k-", label="exact |H|^2 2D/pi")
+    a.plot(s.omega, s.S, "o", ms=3, label="fpk resolvent")
+    a.set(xlabel="omega", ylabel="S(omega)", title="linear oscillator, c = 0.2", yscale="log")
+    a.legend()
+    b.plot(duff.omega, duff.S, "k-")
+    b.axvline(duff.peak_omega, color="0.6", ls=":", label=f"peak {duff.peak_omega:.3f}")
+    b.set(xlabel="omega", ylabel="S(omega)", title="Example 1 (walls at +-1, Ma V_C = 0.4)")
+    b.legend()
+    fig.tight_layout()
+    out = Path(tempfile.mkdtemp(prefix="vibro-example-12-")) / "12_spectrum.png"
+    fig.savefig(out, dpi=100)
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":
