@@ -143,6 +143,14 @@ def first_passage_averaged(model, domain: Domain, start, method: str = "paper", 
     return FirstPassage(method, domain.text, start, mean, t, R, f, back.decay_rate(), None, details)
 
 
+def _needs_state_and_horizon(method: str, start, t_max, why: str) -> None:
+    """The Monte Carlo methods start from a state and stop at t_max: refuse the rest in one line."""
+    if isinstance(start, str):
+        raise ParameterError(f"method {method!r} starts from a state; x0='stationary' is for method='fpk'")
+    if t_max is None:
+        raise ParameterError(f"method {method!r} needs t_max ({why})")
+
+
 def _exit_relation(model, domain: Domain):
     """The domain as the relation phi < 0 in the automaton's states (H replaced by the model's energy)."""
     import sympy as sp
@@ -175,10 +183,7 @@ def first_passage_mc(model, domain: Domain, start, *, paths: int = 2000, dt: flo
     """
     from hybrid.stochastic import simulate_first_passage
 
-    if isinstance(start, str):
-        raise ParameterError("method 'mc' starts from a state; the stationary start is for method fpk")
-    if t_max is None:
-        raise ParameterError("method 'mc' needs t_max (the end of every path; paths still inside are censored)")
+    _needs_state_and_horizon("mc", start, t_max, "the end of every path; paths still inside are censored")
     base, relation = _exit_relation(model, domain)
     t0 = time.perf_counter()
     chunk = chunk_paths or max(1, min(64, paths // 16))
@@ -213,10 +218,7 @@ def first_passage_splitting(model, domain: Domain, start, *, t_max: float | None
     """
     from hybrid.stochastic import splitting_probability
 
-    if isinstance(start, str):
-        raise ParameterError("method 'splitting' starts from a state; x0='stationary' is for method='fpk'")
-    if t_max is None:
-        raise ParameterError("method 'splitting' needs t_max (the probability is that of leaving before t_max)")
+    _needs_state_and_horizon("splitting", start, t_max, "the probability is that of leaving before t_max")
     base, relation = _exit_relation(model, domain)
     t0 = time.perf_counter()
     est = splitting_probability(base, relation.lhs, 0.0, levels=levels, t_max=float(t_max), x0=tuple(start), dt=dt,
@@ -233,13 +235,6 @@ def first_passage_splitting(model, domain: Domain, start, *, t_max: float | None
     res.R_lo = np.array([1.0, max(0.0, 1.0 - P - half)])
     res.R_hi = np.array([1.0, min(1.0, 1.0 - P + half)])
     return res
-
-
-def _wilson(R, n, z=1.96):
-    """95 % Wilson interval of a binomial proportion R out of n."""
-    centre = (R + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(R * (1 - R) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return np.clip(centre - half, 0, 1), np.clip(centre + half, 0, 1)
 
 
 def spectrum(model, observable: str = "x", method: str = "fpk", **options) -> Spectrum:
