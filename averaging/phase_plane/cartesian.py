@@ -25,7 +25,7 @@ from ._cartesian import (
     point_values,
 )
 from ._core import null_vector
-from .solver import BYTES_PER_CELL, SECONDS_PER_CELL, PhaseDensity, _coefficients, _walls
+from .solver import BYTES_PER_CELL, SECONDS_PER_CELL, PhaseDensity, _coefficients, _walls, grid_pair
 
 CARTESIAN_GRID = (120, 120)
 """(cells in x, cells in y): L1 about 1e-5 of the joint density on the bistable Duffing benchmark (D/c = 0.5)."""
@@ -208,12 +208,7 @@ def solve_cartesian(model, grid=CARTESIAN_GRID, h_max: float = 4.0, walls="model
     model.require_autonomous("the stationary phase-plane equations")
     if not (np.isfinite(h_max)):
         raise ParameterError(f"h_max={h_max!r} must be a finite energy")
-    try:
-        nx, ny = (int(v) for v in grid)
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"grid={grid!r} must be a pair (cells in x, cells in y) of integers") from exc
-    if nx < 8 or ny < 8:
-        raise ParameterError(f"grid={grid!r} too small: use at least (8, 8) cells (x, y)")
+    nx, ny = grid_pair(grid, "cells in x, cells in y", (8, 8))
     cells = float(nx) * float(ny)
     check_size(f"the phase-plane grid {nx} x {ny}", memory=cells * BYTES_PER_CELL,
                detail=f"{cells:.3g} cells x {BYTES_PER_CELL} bytes, about {cells * SECONDS_PER_CELL:.3g} s",

@@ -68,7 +68,7 @@ from models.oscillator import _CACHED, T
 from ..stationary import check_energy_range
 from ._core import Discretisation
 from ._grid import RingGrid
-from .solver import DEFAULT_STRETCH, GridWarning, PhaseDensity, _coefficients, _walls
+from .solver import DEFAULT_STRETCH, GridWarning, PhaseDensity, _coefficients, _walls, grid_pair
 
 FORCED_GRID = (120, 128)
 """Default (rings, angles) of the forced solver (``benchmarks/fpk_forced.py``, example 08's forced Duffing impact
@@ -444,12 +444,7 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
         raise ModelError(f"no periodic density by fpk: {exc}") from exc
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
-    try:
-        n_e, n_p = (int(v) for v in grid)
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"grid={grid!r} must be a pair (rings, angles) of integers") from exc
-    if n_e < 8 or n_p < 16:
-        raise ParameterError(f"grid={grid!r} too small: use at least (8, 16) (rings, angles)")
+    n_e, n_p = grid_pair(grid, "rings, angles", (8, 16))
     steps = _count("steps", steps)
     if phases is not None:
         phases = _count("phases", phases)

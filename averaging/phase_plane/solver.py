@@ -358,6 +358,24 @@ def _coefficients(model, law):
     return Coefficients(model.restoring, model.potential, m_nc, s2, law.coefficient)
 
 
+def grid_pair(grid, axes: str, least: tuple[int, int]) -> tuple[int, int]:
+    """The two cell counts of ``grid`` (named ``axes``, e.g. ``"rings, angles"``), at least ``least``, or a one-line
+    :class:`ParameterError`.
+
+    Examples
+    --------
+    >>> grid_pair((60, 64), "rings, angles", (8, 16))
+    (60, 64)
+    """
+    try:
+        first, second = (int(v) for v in grid)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"grid={grid!r} must be a pair ({axes}) of integers") from exc
+    if first < least[0] or second < least[1]:
+        raise ParameterError(f"grid={grid!r} too small: use at least {least} ({axes})")
+    return first, second
+
+
 def _walls(model, walls):
     if isinstance(walls, str) and walls == "model":
         left, right = model.barriers
@@ -410,12 +428,7 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
     model.require_autonomous()
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
-    try:
-        n_e, n_p = (int(v) for v in grid)
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"grid={grid!r} must be a pair (rings, angles) of integers") from exc
-    if n_e < 8 or n_p < 16:
-        raise ParameterError(f"grid={grid!r} too small: use at least (8, 16) (rings, angles)")
+    n_e, n_p = grid_pair(grid, "rings, angles", (8, 16))
     cells = float(n_e) * float(n_p)
     check_size(f"the phase-plane grid {n_e} x {n_p}", memory=cells * BYTES_PER_CELL,
                detail=f"{cells:.3g} cells x {BYTES_PER_CELL} bytes, about {cells * SECONDS_PER_CELL:.3g} s",

@@ -19,7 +19,7 @@ import time
 import warnings
 
 from hybrid.errors import ParameterError
-from vibro.cli.common import add_model_arguments, model_from_args
+from vibro.cli.common import add_model_arguments, model_from_args, phases_path
 from vibro.cli.density_check import check_energy_histogram, check_xy_histogram
 from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
 from vibro.cli.mc_automaton import automaton_from_args, scheme_for
@@ -198,15 +198,6 @@ def plan_outputs(args):
     return plan
 
 
-def _phases_path(args):
-    from pathlib import Path
-
-    if args.phases_out:
-        return Path(args.phases_out)
-    out = Path(args.out)
-    return out.with_name(f"{out.stem}_phases{out.suffix or '.csv'}")
-
-
 def _run_forced(args, model, started, plan) -> int:
     """A forced model: Monte Carlo of its automaton (simulate_automaton), time-averaged and phase-resolved."""
     import numpy as np
@@ -230,7 +221,7 @@ def _run_forced(args, model, started, plan) -> int:
             raise ParameterError(f"--phases needs a model with a periodic forcing (model {model.name!r} has "
                                  f"{'none' if not model.is_forced else 'F = ' + str(model.forcing)}); declare "
                                  "forcing='A*cos(Omega*t)'")
-        plan.file(_phases_path(args), "--phases-out", sidecar=True)
+        plan.file(phases_path(args), "--phases-out", sidecar=True)
     if args.scheme not in set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF):
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
                              f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")
@@ -286,8 +277,8 @@ def _run_forced(args, model, started, plan) -> int:
     if args.phases:
         long = pd.concat([ens.phase_to_pandas(nm).assign(observable=nm) for nm in ens.names], ignore_index=True)
         long = long[["observable", "phase", "t_phase", "lo", "hi", "count", "density"]]
-        atomic_write_text(_phases_path(args), long.to_csv(index=False, float_format="%.17g"))
-        written.append(str(_phases_path(args)))
+        atomic_write_text(phases_path(args), long.to_csv(index=False, float_format="%.17g"))
+        written.append(str(phases_path(args)))
     H = ens.mean("H")
     rates = {tr: ens.rate(tr) for tr in ens.transitions}
     results = {**ens.summary(), "mean_energy": {"value": H.value, "ci": H.ci},
@@ -304,7 +295,7 @@ def _run_forced(args, model, started, plan) -> int:
     if args.joint:
         write_sidecar(args.joint, joint_record(rec, args.xy_bins))
     if args.phases:
-        write_sidecar(_phases_path(args), {**rec, "output": "phases",
+        write_sidecar(phases_path(args), {**rec, "output": "phases",
                                            "settings": {**rec["settings"], "phases": args.phases}})
     if args.summary_json:
         atomic_write_text(args.summary_json, json.dumps(rec, indent=1))

@@ -8,6 +8,8 @@ import argparse
 from hybrid.errors import ParameterError
 from hybrid.io import atomic_write_text
 
+from .common import phases_path
+
 
 def register(subparsers) -> None:
     """Add the ``pdf`` subcommand.
@@ -129,15 +131,6 @@ def _grid(args, default):
     return grid
 
 
-def _phases_path(args):
-    from pathlib import Path
-
-    if args.phases_out:
-        return Path(args.phases_out)
-    out = Path(args.out)
-    return out.with_name(f"{out.stem}_phases{out.suffix or '.csv'}")
-
-
 def _run_forced(args, model, plan) -> int:
     """A forced model by ``fpk``: the periodic density, its time average in OUT and, with --phases, the sections."""
     import math
@@ -154,7 +147,7 @@ def _run_forced(args, model, plan) -> int:
     if args.bins < 1 or min(args.xy_bins) < 1:
         raise ParameterError(f"--bins {args.bins} and --xy-bins {args.xy_bins[0]} {args.xy_bins[1]} must be >= 1")
     if args.phases:
-        plan.file(_phases_path(args), "--phases-out")
+        plan.file(phases_path(args), "--phases-out", sidecar=True)
     grid = _grid(args, FORCED_GRID)
     sol = periodic_density_xy(model, grid=grid, h_max=args.h_max, steps=args.steps, phases=args.phases or None,
                               points=args.points, extrapolate=args.extrapolate)
@@ -189,8 +182,8 @@ def _run_forced(args, model, plan) -> int:
         atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
         written.append(args.joint)
     if phase_table is not None:
-        atomic_write_text(_phases_path(args), phase_table.to_csv(index=False, float_format="%.17g"))
-        written.append(str(_phases_path(args)))
+        atomic_write_text(phases_path(args), phase_table.to_csv(index=False, float_format="%.17g"))
+        written.append(str(phases_path(args)))
     results = {"mean_energy": sol.mean_energy, "impact_rate": sol.impact_rate, "mean_x2": sd.mean_x2,
                "prob_below_barrier": sd.prob_below_barrier, "periodicity": sol.periodicity,
                "conservation": sol.conservation, "gmres_iterations": sol.iterations}
@@ -208,6 +201,8 @@ def _run_forced(args, model, plan) -> int:
     if args.joint is not None:
         write_sidecar(args.joint, {**rec, "output": "joint",
                                    "settings": {**rec["settings"], "joint_points": args.joint_points}})
+    if phase_table is not None:  # every file written carries its provenance, as vibro mc's phases file does
+        write_sidecar(phases_path(args), {**rec, "output": "phases"})
     print(f"model {model.name} {dict(model.params)} restitution {model.restitution.spec()} method fpk (forced, "
           f"period {sol.period:.10g}, {len(sol.times)} steps, {sol.iterations} period maps)")
     print(f"noise: {noise_assumption(model)['text']}")

@@ -48,6 +48,27 @@ def output_plan(args: argparse.Namespace):
     return plan
 
 
+def beside(out, name: str):
+    """The file named after ``--out`` for the output ``name``: ``h.csv`` -> ``h_NAME.csv``.
+
+    Examples
+    --------
+    >>> beside("runs/h.csv", "phases").as_posix()
+    'runs/h_phases.csv'
+    """
+    from pathlib import Path
+
+    out = Path(out)
+    return out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
+
+
+def phases_path(args: argparse.Namespace):
+    """Where the phase-resolved histograms or densities go: ``--phases-out``, or OUT with ``_phases``."""
+    from pathlib import Path
+
+    return Path(args.phases_out) if args.phases_out else beside(args.out, "phases")
+
+
 def parse_params(items: list[str]) -> dict[str, float]:
     """Turn ``["a=1", "delta=0.8"]`` into a dict of floats, with a clear error on bad items.
 

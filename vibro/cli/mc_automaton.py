@@ -27,6 +27,7 @@ from pathlib import Path
 
 from hybrid.errors import ParameterError
 from hybrid.sizes import check_size
+from vibro.cli.common import beside
 
 FILTERS = ("bandpass", "ou")
 """Names of ``models.excitation.FILTER_KINDS`` (kept here so that ``vibro --help`` imports no sympy)."""
@@ -238,14 +239,14 @@ def run(args, resolved, plan) -> int:
     obs, hist = _choose_observables(args, automaton)
     out = Path(args.out)
     first = "H" if "H" in obs else next(iter(obs))
-    extra = {name: out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}") for name in obs if name != first}
+    extra = {name: beside(out, name) for name in obs if name != first}
     if automaton.transitions:
-        extra["transitions"] = out.with_name(f"{out.stem}_transitions{out.suffix or '.csv'}")
+        extra["transitions"] = beside(out, "transitions")
     if args.events:
-        extra["events"] = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
+        extra["events"] = beside(out, "events")
     if args.snapshots:
         for name in ("snapshots", "snapshot_histograms"):
-            extra[name] = out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
+            extra[name] = beside(out, name)
     for name, path in extra.items():  # the files named after --out, checked before the run
         plan.file(path, f"the {name} file of --out", sidecar=True)
     n = len(automaton.states)
@@ -287,7 +288,7 @@ def run(args, resolved, plan) -> int:
     names = list(ens.names)
     for name in names:  # the one check of every density written (hybrid.resolution)
         if name in ens.counts:
-            where = out if name == first else out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
+            where = out if name == first else extra[name]
             check_observable_histogram(where, name, ens.density(name)[0], ens.counts[name][1:-1],
                                        ens.mean(name).value)
     files = [out]
@@ -295,17 +296,17 @@ def run(args, resolved, plan) -> int:
     atomic_write_text(out, frame.to_csv(index=False, float_format="%.17g"))
     for name in names:
         if name != first:
-            path = out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
+            path = extra[name]
             atomic_write_text(path, _histogram_frame(ens, name).to_csv(index=False, float_format="%.17g"))
             files.append(path)
     if ens.transitions:
-        path = out.with_name(f"{out.stem}_transitions{out.suffix or '.csv'}")
+        path = extra["transitions"]
         table = pd.DataFrame({"transition": list(ens.transitions), "firings": ens.events,
                               "rate": [ens.rate(t) for t in ens.transitions]})
         atomic_write_text(path, table.to_csv(index=False, float_format="%.17g"))
         files.append(path)
     if args.events:
-        path = out.with_name(f"{out.stem}_events{out.suffix or '.csv'}")
+        path = extra["events"]
         atomic_write_text(path, ens.events_to_pandas().to_csv(index=False, float_format="%.17g"))
         files.append(path)
     snap = None
