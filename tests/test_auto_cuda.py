@@ -256,3 +256,25 @@ def test_without_a_device_one_line(tmp_path):
     assert "no CUDA device was found" in out[0] or 'pip install -e ".[cuda]"' in out[0]
     assert out[1] == "RC 2" and len(r.stderr.strip().splitlines()) == 1 and "vibro mc: error:" in r.stderr
     assert not (tmp_path / "h.csv").exists()
+
+
+def test_automaton_kernel_compiles_to_ptx_for_the_h100():
+    """The real numba-cuda pipeline (typing, lowering, NVVM) on the impact pair's kernel, for sm_90, without a GPU.
+
+    The simulator runs the kernel as Python and checks no types; this does. It needs NVVM and NVRTC (the
+    ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels on LD_LIBRARY_PATH, or a CUDA toolkit), which CI
+    does not install: skipped there.
+    """
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" or not HAVE_NUMBA_CUDA:
+        pytest.skip("needs numba-cuda without the simulator")
+    import numba
+    from numba import cuda
+
+    try:
+        cuda.compile_ptx(lambda a: None, (numba.float64,), cc=(9, 0))
+    except Exception as exc:
+        pytest.skip(f"cannot compile PTX here: {type(exc).__name__}")
+    automaton = impact_pair()
+    ptx = _auto_cuda.compile_ptx(automaton, "splitting", dict(automaton.observables), phases=4)
+    ops = set(re.findall(r"^\s+([a-z][\w.]*)", ptx, re.M))
+    assert {"atom.shared.add.u32", "atom.global.add.u64", "bar.sync", "fma.rn.f64"} <= ops

@@ -34,6 +34,7 @@ from __future__ import annotations
 import ast
 import re
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -289,7 +290,7 @@ def layout(n_obs: int, width: int, n_trans: int, v_bins: int, joint_bins: tuple,
     --------
     >>> lay = layout(1, 42, 2, 100, (1, 1), 1)
     >>> lay["h_off"], lay["cells"], lay["shared"] == lay["cells"]
-    (202, 245, True)
+    (202, 287, True)
     """
     vw = int(v_bins) + 1
     h_off = max(n_trans, 1) * vw
@@ -512,7 +513,8 @@ class CudaRun:
         state = save(n) if ckdir is not None else {k: dev[k].copy_to_host() for k in self.ORDER}
         self._fill(rows, state, total)
         return {"scheduler": "cuda", "precision": self.precision, "rng": RNG, "threads_per_block": self.tpb,
-                "launch_steps": int(launch_steps), "device_seconds": time.perf_counter() - t_start}
+                "launch_steps": int(launch_steps), "device_seconds": time.perf_counter() - t_start,
+                "cuda_kernel": self.name}
 
     def _fill(self, rows: dict, s: dict, total: int) -> None:
         """Per-path rows -> the runner's per-chunk rows (added in path order); the histograms into chunk 0's row."""
@@ -580,3 +582,76 @@ def max_registers_from_env() -> int | None:
     if not 16 <= n <= 255:
         raise ParameterError(f"VIBRO_CUDA_MAX_REGISTERS={raw!r} must be an integer in [16, 255] (or 0: no cap)")
     return n
+
+
+def kernel_resources(settings: dict) -> dict:
+    """Registers and local memory per thread, shared memory per block and the occupancy they allow, of the kernel
+    that ran an ensemble (its ``settings``), on the current device. Needs a real GPU (the simulator compiles nothing).
+
+    Occupancy: resident warps per SM over the most an SM holds, from the limits on threads, registers (allocated
+    per warp in units of 256), shared memory and 32 blocks per SM (the CUDA occupancy calculator's rule).
+    """
+    cuda = require_cuda()
+    if simulator_enabled():
+        raise CudaUnavailableError("kernel_resources needs a GPU: the simulator compiles no kernel")
+    module = _codegen._LOADED.get(settings.get("cuda_kernel"))
+    if module is None:
+        raise ParameterError("kernel_resources: the ensemble's CUDA kernel was not run in this process")
+    kernel = module.advance
+    regs = int(kernel.get_regs_per_thread())
+    local = int(kernel.get_local_mem_per_thread())
+    shared = int(kernel.get_shared_mem_per_block())
+    dev = cuda.get_current_device()
+    tpb = int(settings["threads_per_block"])
+    warps = -(-tpb // 32)
+    per_warp = -(-regs * 32 // 256) * 256
+    blocks = min(int(dev.MAX_THREADS_PER_MULTIPROCESSOR) // tpb,
+                 int(dev.MAX_REGISTERS_PER_MULTIPROCESSOR) // max(per_warp * warps, 1),
+                 int(dev.MAX_SHARED_MEMORY_PER_MULTIPROCESSOR) // max(shared, 1), 32)
+    occupancy = blocks * warps * 32 / int(dev.MAX_THREADS_PER_MULTIPROCESSOR)
+    return {"registers_per_thread": regs, "local_bytes_per_thread": local, "shared_bytes_per_block": shared,
+            "blocks_per_sm": blocks, "occupancy": occupancy}
+
+
+def kernel_signature(precision: str = "f64") -> tuple:
+    """numba types of the arguments of ``advance``, in the order :meth:`CudaRun.advance` passes them."""
+    from numba import types as t
+
+    f = t.float32 if precision == "f32" else t.float64
+    i, d = t.int64, t.float64
+
+    def arr(dtype, ndim):
+        return t.Array(dtype, ndim, "C")
+
+    return (i, i, i, i, i, t.uint64, t.uint64, f, f, arr(f, 1), arr(f, 1), arr(f, 1), arr(i, 1), i, i, arr(f, 1),
+            arr(f, 1), arr(i, 1), f, i, t.boolean, i, i, arr(f, 2), arr(i, 1), arr(i, 2), arr(d, 2), arr(d, 3),
+            arr(i, 2), arr(d, 2), arr(d, 3), arr(i, 1))
+
+
+def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: int = 42, v_bins: int = 100,
+                phases: int = 0, precision: str = "f64", cc=(9, 0)) -> str:
+    """PTX of the automaton kernel for compute capability ``cc`` (default sm_90, the H100), without a GPU.
+
+    The real numba-cuda pipeline (typing, lowering, NVVM), which the simulator skips. Needs numba-cuda and the NVVM
+    and NVRTC libraries (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels or a CUDA toolkit),
+    not a driver; ``NUMBA_ENABLE_CUDASIM`` must be unset.
+    """
+    from numba import cuda
+
+    if getattr(cuda, "implementation", "") != "NVIDIA" or simulator_enabled():
+        raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
+    lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
+    src, _ = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
+                                  cache=False)
+    module, _ = _codegen.load_source(f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}", src)
+    from numba.cuda import dispatcher
+
+    # numba-cuda compiles a kernel's device functions for the current device's compute capability; without a device
+    # there is none, so it is given for this compile only
+    current = dispatcher.get_current_device
+    dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=tuple(cc))
+    try:
+        ptx, _ = cuda.compile_ptx(module.advance.py_func, kernel_signature(precision), cc=cc)
+    finally:
+        dispatcher.get_current_device = current
+    return ptx
