@@ -147,10 +147,57 @@ def automata(a) -> dict:
     return out
 
 
+def registers(a) -> dict:
+    """Registers per thread of each model's automaton kernel for sm_90 from its PTX (``ptxas -v``), without a GPU.
+
+    Needs numba-cuda, NVVM and NVRTC (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels, their
+    library folders on LD_LIBRARY_PATH) and ``ptxas`` (on PATH, or the one in the nvcc wheel).
+    """
+    import re
+    import shutil
+    import subprocess
+    import tempfile
+
+    from hybrid.stochastic import _auto_cuda
+
+    ptxas = shutil.which("ptxas")
+    if ptxas is None:
+        import nvidia.cuda_nvcc as wheel  # noqa: F401  (the nvidia-cuda-nvcc-cu12 wheel ships ptxas)
+
+        ptxas = str(Path(list(wheel.__path__)[0]) / "bin" / "ptxas")
+    out = {}
+    for name, (automaton, scheme, kw) in automaton_models().items():
+        obs = dict(automaton.observables) if "observables" not in kw else kw["observables"]
+        obs = {k: v for k, v in obs.items() if k in kw["histograms"]}
+        width = max(b for _, _, b in kw["histograms"].values()) + 2
+        for prec in ("f64", "f32") if name == "Example 1" else ("f64",):
+            t0 = time.perf_counter()
+            ptx = _auto_cuda.compile_ptx(automaton, scheme, obs, histograms_width=width, phases=kw.get("phases", 0),
+                                         precision=prec)
+            with tempfile.TemporaryDirectory() as tmp:
+                path = Path(tmp) / "k.ptx"
+                path.write_text(ptx)
+                r = subprocess.run([ptxas, "-arch=sm_90", "-v", str(path), "-o", str(Path(tmp) / "k.cubin")],
+                                   capture_output=True, text=True)
+            info = r.stderr
+            regs = re.search(r"Used (\d+) registers", info)
+            stack = re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads", info)
+            row = {"registers": int(regs.group(1)) if regs else None,
+                   "stack_bytes": int(stack.group(1)) if stack else None,
+                   "spill_stores": int(stack.group(2)) if stack else None, "compile_s": time.perf_counter() - t0}
+            out[f"{name} {prec}"] = row
+            print(f"{name:<24} {scheme:<10} {prec}: {row['registers']} registers/thread, stack {row['stack_bytes']} "
+                  f"B, spill stores {row['spill_stores']} B (sm_90, ptxas; PTX compile {row['compile_s']:.0f} s)",
+                  flush=True)
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--automata", action="store_true",
                     help="the automaton kernel on the models of issue 22 (CPU and GPU per model, registers)")
+    ap.add_argument("--registers", action="store_true",
+                    help="registers per thread of the automaton kernels for sm_90 from PTX (ptxas -v; no GPU needed)")
     ap.add_argument("--quick", action="store_true", help="small sizes (seconds)")
     ap.add_argument("--scheme", default="milstein", choices=["milstein", "splitting", "em", "naive"])
     ap.add_argument("--paths", type=int, help="GPU paths (default 2**20; --quick 2**16, simulator 64)")
@@ -165,6 +212,8 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     if a.automata:
         return _finish(automata(a), a)
+    if a.registers:
+        return _finish(registers(a), a)
     import numba
 
     out = {"scheme": a.scheme, "dt": DT, "model": "Example 1, delta=1, Ma V_C=0.4",
