@@ -245,6 +245,9 @@ _VHIST = re.compile(r"^(\s*)vhist\[best, (.+)\] \+= 1$", re.M)
 def _to_device(src: str) -> str:
     """The CPU statements of the generated pieces that the device does otherwise: ``@nb.njit`` -> device functions,
     per-chunk histogram increments -> atomics on the flat cells (shared where they fit)."""
+    if re.search(r"\b_user_law\b", src):
+        raise ModelError("scheduler='cuda' needs the restitution law as a sympy expression of v "
+                         "(CustomRestitution('...')); a Python callable cannot be compiled for the device")
     src = _DECORATOR.sub("@cuda.jit(device=True)", src)
     src = _HIST.sub(lambda m: f"{m[1]}count(sh, gh, H_OFF + {m[2]} * WIDTH + {m[3]})", src)
     # the speeds' cells come first in the layout and always fit in the shared copy (event_step gets it as vhist)
@@ -427,6 +430,7 @@ class CudaRun:
                         a["obs_bins"].astype(np.int64), np.int64(a["jx"]), np.int64(a["jy"]), a["j_lo"].astype(ft),
                         a["j_scale"].astype(ft), a["j_bins"].astype(np.int64), ft(a["v_scale"]),
                         np.int64(a["v_bins"]))
+        self._check_memory(int(job.npaths.sum()))  # before any compile or launch
 
     def fresh(self, paths: int) -> dict:
         """The host arrays of ``paths`` paths at t = 0."""
@@ -515,6 +519,21 @@ class CudaRun:
         return {"scheduler": "cuda", "precision": self.precision, "rng": RNG, "threads_per_block": self.tpb,
                 "launch_steps": int(launch_steps), "device_seconds": time.perf_counter() - t_start,
                 "cuda_kernel": self.name}
+
+    def _check_memory(self, paths: int) -> None:
+        """Refuse, with the estimate, per-path rows that do not fit in the device's memory (the simulator: 4 GB)."""
+        from hybrid.sizes import check_size
+
+        mod, ft = self.module, np.dtype(self.ft).itemsize
+        row = (self.n * ft + 8 * (1 + 6 + self.n_obs + max(self.phases, 1) * self.n_obs + mod.IW + mod.FW)
+               + 24 * self.job.shapes["elog"][0][1])
+        if simulator_enabled():
+            limit = 4e9
+        else:
+            limit = 0.8 * self.cuda.current_context().get_memory_info()[0]
+        check_size(f"scheduler='cuda' with {paths} paths", memory=float(paths) * row, max_memory=limit,
+                   detail=f"{row} bytes of state, counters and sums per path, against 80 % of the device's free "
+                          "memory", fix="run fewer paths per call and merge the ensembles")
 
     def _fill(self, rows: dict, s: dict, total: int) -> None:
         """Per-path rows -> the runner's per-chunk rows (added in path order); the histograms into chunk 0's row."""
