@@ -617,9 +617,13 @@ def kernel_resources(settings: dict) -> dict:
     if module is None:
         raise ParameterError("kernel_resources: the ensemble's CUDA kernel was not run in this process")
     kernel = module.advance
-    regs = int(kernel.get_regs_per_thread())
-    local = int(kernel.get_local_mem_per_thread())
-    shared = int(kernel.get_shared_mem_per_block())
+
+    def one(value):  # a kernel compiled at its first launch answers per signature: it has one
+        return int(next(iter(value.values())) if isinstance(value, dict) else value)
+
+    regs = one(kernel.get_regs_per_thread())
+    local = one(kernel.get_local_mem_per_thread())
+    shared = one(kernel.get_shared_mem_per_block())
     dev = cuda.get_current_device()
     tpb = int(settings["threads_per_block"])
     warps = -(-tpb // 32)
