@@ -29,6 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from hybrid.errors import VibroError  # noqa: E402
 from hybrid.stochastic import _auto_cuda, _cuda_rng, drive_automaton, simulate_automaton  # noqa: E402
 from hybrid.stochastic._auto_codegen import analyse  # noqa: E402
 from models import DuffingImpact, ForcedDuffingImpact, ImpactOscillator, Newton  # noqa: E402
@@ -167,6 +168,13 @@ def main(out: Path) -> None:
         t0 = time.perf_counter()
         cpu_references(out, name, automaton, scheme, kw)
         print(f"cpu {name}: {time.perf_counter() - t0:.1f} s", flush=True)
+    try:  # a request whose per-path rows cannot fit: refused with the estimate before any work
+        automaton, scheme, kw = table["impact_pair"]
+        simulate_automaton(automaton, scheme, **dict(kw, paths=10**9, t_end=0.04, t_burn=0.0, events=0,
+                                                     max_path_steps=1e20))
+        (out / "too_many.txt").write_text("not refused")
+    except VibroError as exc:
+        (out / "too_many.txt").write_text(f"{type(exc).__name__}: {exc}")
     t0 = time.perf_counter()
     cli_runs(out)
     print(f"cli: {time.perf_counter() - t0:.1f} s", flush=True)
