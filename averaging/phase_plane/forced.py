@@ -283,10 +283,12 @@ class _RingPlane:
         (xr, yr), (xa, ya) = self.disc.drift_points()
         self._split = len(xr)
         self.drift_xy = (np.concatenate([xr, xa]), np.concatenate([yr, ya]))
+        self._g = free.restoring(self.drift_xy[0])  # the rings take the non-conservative drift m + g
         self._energy = self.mass_weight * g.H_c[g.ring]
         self.h_min = 0.0
 
     def operator(self, m):
+        m = m + self._g
         return self.disc.operator_with_drift(m[:self._split], m[self._split:])
 
     def unforced(self):
