@@ -178,9 +178,10 @@ def test_cli_phases_on_an_unforced_model_is_one_line(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_against_monte_carlo_phase_resolved():
-    # example 08's forced Duffing (D = 0.02) against the stored Monte Carlo (2 x 384 000 samples per phase; noise
-    # 0.003 in L1 on 40 bins): measured 0.024 mean over the 16 phases at the default grid (the goal is 0.005; see
-    # docs/results/fpk-forced.md); the bound guards that figure
+    # example 08's forced Duffing (D = 0.02) against the stored Monte Carlo (4 x 384 000 samples per phase; noise
+    # 0.0022 mean, 0.0027 max in L1 on 40 bins): measured 0.0031 mean and 0.0050 max over the 16 phases at the
+    # default grid (docs/results/fpk-forced.md). The bounds: the issue's goal 0.005 for the mean, and for the worst
+    # phase the measured figure plus the Monte Carlo noise of one phase
     import sys
     from pathlib import Path
 
@@ -190,9 +191,6 @@ def test_against_monte_carlo_phase_resolved():
     edges, ref, noise = fpk_forced.mc_reference("0.02")
     sol = periodic_density_xy(fpk_forced.duffing(0.02), phases=16)
     l1 = np.array([np.abs(s.bin_masses(edges) - r).sum() for s, r in zip(sol.sections(16), ref)])
-    assert noise.max() < 0.006
-    assert l1.mean() < 0.03 and l1.max() < 0.04
-    # Richardson with the grid twice coarser: measured 0.0090 mean, 0.0118 max
-    sol = periodic_density_xy(fpk_forced.duffing(0.02), phases=16, extrapolate=True)
-    l1 = np.array([np.abs(s.bin_masses(edges) - r).sum() for s, r in zip(sol.sections(16), ref)])
-    assert l1.mean() < 0.012 and l1.max() < 0.015
+    assert noise.max() < 0.003
+    assert l1.mean() < 0.005 and l1.max() < 0.005 + noise.max()
+    assert sol.error_estimate < 0.006  # measured 0.0045: the two-grid estimate is of the size of the error
