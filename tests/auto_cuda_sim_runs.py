@@ -25,10 +25,12 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import sympy as sp
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from hybrid.automaton import HybridAutomaton, Mode, Transition, real_symbol  # noqa: E402
 from hybrid.errors import VibroError  # noqa: E402
 from hybrid.stochastic import _auto_cuda, _cuda_rng, drive_automaton, simulate_automaton  # noqa: E402
 from hybrid.stochastic._auto_codegen import analyse  # noqa: E402
@@ -62,7 +64,19 @@ def models() -> dict:
         "ou": (ou_filter(duffing, alpha=4.0), "splitting",
                dict(common, dt=0.05, t_end=15.0, t_burn=5.0, x0=(0.0, 0.0, 0.0, 0.0),
                     histograms={"H": (0.0, 4.0, 40)})),
+        # a guard of the velocities (an energy level): located in the kicks and noise too (velocity_leg)
+        "energy_level": (energy_level(), "splitting",
+                         dict(common, paths=16, dt=0.05, t_end=10.0, t_burn=2.0, x0=(0.5, 0.0),
+                              histograms={"H": (0.0, 1.0, 10)})),
     }
+
+
+def energy_level():
+    """A damped oscillator whose velocity is halved where its energy reaches 1/2 from below."""
+    x, v, c, d = (real_symbol(n) for n in ("x", "v", "c", "D"))
+    return HybridAutomaton((x, v), {"c": 0.1, "D": 0.2}, [Mode("m", (v, -x - c * v), (0, sp.sqrt(2 * d)))],
+                           [Transition("level", "m", "m", x**2 + v**2 - 1, 1, (x, v / 2))],
+                           observables={"H": (x**2 + v**2) / 2})
 
 
 # extra runs of two models: another launch configuration, single precision, and an interrupted and resumed run

@@ -1,7 +1,8 @@
 """``scheduler="cuda"`` for automaton ensembles (hybrid/stochastic/_auto_cuda.py) on numba's CUDA simulator.
 
 Every model of issue 22, item 2: Example 1 (Ma's law), the stop at the equilibrium, the impact pair, the vibrating
-table, a forced model with phase sections and an OU-filtered model. One subprocess (tests/auto_cuda_sim_runs.py)
+table, a forced model with phase sections and an OU-filtered model; and a guard of the velocities (an energy level,
+located in the kicks and the noise too). One subprocess (tests/auto_cuda_sim_runs.py)
 runs them all, tiny (32 paths x 200-300 steps), with their CPU references. Checked here:
 
 * the device module is the automaton generator's own code (the same functions, the same fast step);
@@ -42,7 +43,7 @@ import auto_cuda_sim_runs as runs  # noqa: E402
 HAVE_NUMBA_CUDA = any(importlib.util.find_spec(m) is not None for m in ("numba_cuda", "numba.cuda"))
 needs_sim = pytest.mark.skipif(not HAVE_NUMBA_CUDA, reason="numba.cuda is not importable (pip install -e '.[test]' "
                                                            "installs numba-cuda, whose simulator these tests use)")
-MODELS = ("example1", "stop", "impact_pair", "table", "forced", "ou")
+MODELS = ("example1", "stop", "impact_pair", "table", "forced", "ou", "energy_level")
 
 
 def _env(**extra):
