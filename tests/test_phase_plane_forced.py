@@ -133,6 +133,9 @@ def test_refusals():
         periodic_density_xy(ForcedDuffingImpact(), steps=0)
     with pytest.raises(ParameterError, match="scheme"):
         periodic_density_xy(ForcedDuffingImpact(), scheme="rk4")
+    # without noise the periodic state is an orbit, not a density: refused before any cell is built
+    with pytest.raises(ParameterError, match="no noise"):
+        periodic_density_xy(ForcedDuffingImpact(D=0.0))
     # an h_max below the mass: refused from the unforced density, before any period map
     with pytest.raises(NormalisationError, match="does not decay"):
         periodic_density_xy(ForcedDuffingImpact(), grid=(40, 48), steps=8, h_max=1e-9)
@@ -174,6 +177,14 @@ def test_cli_phases_on_an_unforced_model_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "--phases needs" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_cli_forced_without_noise_is_one_line(tmp_path, capsys):
+    rc = main(["pdf", "--method", "fpk", "--model", "duffing-forced", "--param", "D=0", "--phases", "16",
+               "--out", str(tmp_path / "p.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no noise" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "p.csv").exists() and not (tmp_path / "p_phases.csv").exists()
 
 
 @pytest.mark.slow

@@ -163,13 +163,7 @@ class CartesianDiscretisation:
         s2 = np.asarray(np.broadcast_to(coef.s2(grid.x, grid.y), (n,)), dtype=float)
         self.s2 = s2
         rows, cols, vals = [], [], []
-
-        def add_flux(src, dst, fcols, fvals):
-            # flux (sum_k fvals[k] * p[fcols[k]]) from cell src to cell dst
-            for c, v in zip(fcols, fvals):
-                rows.extend([src, dst])
-                cols.extend([c, c])
-                vals.extend([v, -v])
+        add_flux = _flux_adder(rows, cols, vals)
 
         # ---- x faces: convection y p (y constant along a row), upwind-biased in the sign of y
         I, J = np.meshgrid(np.arange(grid.nx - 1), np.arange(grid.ny), indexing="ij")
@@ -287,12 +281,7 @@ class CartesianDiscretisation:
         I, J, a, b = self._y_faces
         m, m_r, m_l = np.split(np.asarray(m_all, dtype=float), 3)
         rows, cols, vals = [], [], []
-
-        def add_flux(src, dst, fcols, fvals):
-            for c, v in zip(fcols, fvals):
-                rows.extend([src, dst])
-                cols.extend([c, c])
-                vals.extend([v, -v])
+        add_flux = _flux_adder(rows, cols, vals)
 
         pos = m > 0
         up, down = np.where(pos, a, b), np.where(pos, b, a)
@@ -320,6 +309,19 @@ class CartesianDiscretisation:
         v = np.abs(self.grid.yc[J_in])
         order = np.argsort(v)
         return v[order], (flux_coef * pf)[order]
+
+
+def _flux_adder(rows, cols, vals):
+    """``add_flux(src, dst, fcols, fvals)``: the flux sum_k fvals[k] * p[fcols[k]] from cell src to cell dst, as
+    (row, column, value) arrays appended to ``rows``, ``cols``, ``vals`` (it leaves src and enters dst: conserved)."""
+
+    def add_flux(src, dst, fcols, fvals):
+        for c, v in zip(fcols, fvals):
+            rows.extend([src, dst])
+            cols.extend([c, c])
+            vals.extend([v, -v])
+
+    return add_flux
 
 
 def _assemble(rows, cols, vals, n):

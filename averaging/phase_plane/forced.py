@@ -585,6 +585,11 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         raise ModelError(f"no periodic density by fpk: {exc}") from exc
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
+    if model.substitute(model.diffusion_squared) == 0:
+        # without noise the periodic state is a deterministic orbit (a density concentrated on a curve): no grid
+        # holds it, and the scheme's own diffusion would stand in for the missing noise
+        raise ParameterError(f"model {model.name!r} has no noise (sigma**2 = 0): fpk needs a positive noise "
+                             "intensity D; simulate the deterministic orbit instead")
     if cells not in PLANES:
         raise ParameterError(f"cells={cells!r}: use 'cartesian' or 'rings'")
     plane_of, default, axes, least = PLANES[cells]
