@@ -42,7 +42,10 @@ about K/2 factors are computed per run (the matrices are keyed by the drift they
 
 Error estimate. With ``check`` (default) the same problem is solved on the grid twice coarser, and the L1 of
 p(H | t) between the two, over 3 (order 2, conservative), is ``error_estimate``; a :class:`GridWarning` says when it
-exceeds ``l1_tol``. ``time_correction`` is the size of the time extrapolation (the time error of the K-step run).
+exceeds ``l1_tol``. Both grids take the same steps, so this is the error of the cells alone: it does not see the
+time error. ``time_correction`` is the size of the time extrapolation, i.e. the time error of the 2K-step
+Crank-Nicolson run (L1 of the cell densities): an upper bound on the time error of the combination, which is
+reported but not checked against ``l1_tol``; ``scheme="cn"`` and ``"bdf2"`` carry no time error estimate at all.
 
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): on example 08 (D = 0.02) the L1 of p(H | t)
 against converged Monte Carlo (noise 0.0022) is 0.0031 mean and 0.0050 worst over 16 phases at the default grid
@@ -141,10 +144,11 @@ class PeriodicDensity:
         ``"cartesian"`` or ``"rings"``.
     error_estimate : float or None
         Estimated L1 error of p(H | t) on 100 bins (the largest over the phases), from the solve on the grid twice
-        coarser (``check=True``).
+        coarser with the same steps (``check=True``): the error of the cells only, not of the time steps.
     time_correction : float or None
-        max over the stored times of the L1 between the 2K-step run and the extrapolated density
-        (``scheme="richardson"``): the time error of Crank-Nicolson alone.
+        max over the stored times of the L1 (cell densities) between the 2K-step run and the extrapolated density
+        (``scheme="richardson"``; None otherwise): the time error of Crank-Nicolson alone at 2K steps, an upper
+        bound on the time error of the extrapolated density.
     timing : dict
         Seconds spent assembling, factoring, solving and marching.
     """
@@ -541,9 +545,10 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         fourth order, the time error of a section's moments falls from 8e-3 to 5e-4 on the linear oscillator),
         Crank-Nicolson alone, or BDF2 (L-stable, larger error).
     check : bool
-        Also solve on the grid twice coarser (same steps) and estimate the L1 error of p(H | t) on 100 bins from
-        the two (``error_estimate``, order 2 assumed: conservative, the Cartesian scheme converges at order 2 next
-        to an inelastic wall and faster elsewhere); warn (:class:`GridWarning`) when it exceeds ``l1_tol``.
+        Also solve on the grid twice coarser (same steps) and estimate the L1 error of p(H | t) on 100 bins due to
+        the cells (not the time steps: see ``time_correction``) from the two (``error_estimate``, order 2 assumed:
+        conservative, the Cartesian scheme converges at order 2 next to an inelastic wall and faster elsewhere);
+        warn (:class:`GridWarning`) when it exceeds ``l1_tol``.
     l1_tol : float
         The L1 error of p(H | t) above which ``check`` warns.
     extrapolate : bool
