@@ -151,6 +151,16 @@ class PeriodicDensity:
         bound on the time error of the extrapolated density.
     timing : dict
         Seconds spent assembling, factoring, solving and marching.
+
+    Examples
+    --------
+    >>> from models import ForcedDuffingImpact
+    >>> pd_ = periodic_density_xy(ForcedDuffingImpact(), grid=(24, 48), steps=8, phases=4, check=False)
+    >>> t = pd_.phase_times(4)  # the sections of vibro mc --phases 4: stored steps
+    >>> bool(abs(pd_.mean_energy_at(t).mean() - pd_.mean_energy) < 0.05 * pd_.mean_energy)
+    True
+    >>> [round(float(s.bin_masses([0.0, 4.0])[0]), 6) for s in pd_.sections(2)], pd_.impact_rate_at(t).shape
+    ([1.0, 1.0], (4,))
     """
 
     method = "fpk"
