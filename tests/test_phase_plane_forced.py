@@ -179,11 +179,16 @@ def test_cli_phases_on_an_unforced_model_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "p.csv").exists()
 
 
-def test_cli_forced_without_noise_is_one_line(tmp_path, capsys):
-    rc = main(["pdf", "--method", "fpk", "--model", "duffing-forced", "--param", "D=0", "--phases", "16",
+@pytest.mark.parametrize("args, words", [
+    (["--param", "D=0"], "no noise"),  # no density to compute (it ran for minutes)
+    (["--bins", "100000000"], "rows of the phases table"),  # refused with the estimate, before the solve
+    (["--phases", "1000000"], "rows of the phases table"),
+])
+def test_cli_forced_refusals_are_one_line(tmp_path, capsys, args, words):
+    rc = main(["pdf", "--method", "fpk", "--model", "duffing-forced", "--phases", "16", *args,
                "--out", str(tmp_path / "p.csv")])
     err = capsys.readouterr().err
-    assert rc == 2 and "no noise" in err and len(err.strip().splitlines()) == 1
+    assert rc == 2 and words in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "p.csv").exists() and not (tmp_path / "p_phases.csv").exists()
 
 

@@ -629,7 +629,8 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
                memory=n_cells * per * factors,
                detail=f"{factors:.0f} LU factors of {n_cells:.3g} cells x {per} bytes, about "
                       f"{n_cells * factors * SECONDS_PER_CELL_FACTOR[cells]:.3g} s",
-               fix=f"use a coarser grid or fewer steps (the defaults are {default} and {DEFAULT_STEPS})")
+               fix=f"use a coarser grid or fewer steps (the defaults are {default} and {DEFAULT_STEPS})"
+                   + ("" if phases is None else f"; the steps are a multiple of phases={phases}"))
 
     check_energy_range(free, float(h_max), walls)
     from .solver import _first_range

@@ -91,6 +91,7 @@ PDF_TOL = 0.01
 _MAX_POINTS = 10_000_000  # stationary_density's own limit
 _BYTES_PER_POINT = 8 * 12  # the output arrays, the jump chain's grid arrays and the CSV text, about
 _MAX_JOINT_CELLS = 10_000**2
+_BYTES_PER_PHASE_ROW = 300  # a row of the --phases table (pandas, with its string column) and its CSV line, about
 _BYTES_PER_CELL = 8 * 8 + 60  # meshgrid, energies, density, and one CSV line
 
 
@@ -147,6 +148,14 @@ def _run_forced(args, model, plan) -> int:
     if args.bins < 1 or min(args.xy_bins) < 1:
         raise ParameterError(f"--bins {args.bins} and --xy-bins {args.xy_bins[0]} {args.xy_bins[1]} must be >= 1")
     if args.phases:
+        from hybrid.sizes import check_size
+
+        # the phases table is built in memory, then written as CSV text: refuse a huge one before the solve
+        rows = float(args.phases) * (args.bins + args.xy_bins[0] + args.xy_bins[1])
+        check_size(f"--phases {args.phases} with --bins {args.bins} and --xy-bins {args.xy_bins[0]} "
+                   f"{args.xy_bins[1]}", memory=rows * _BYTES_PER_PHASE_ROW,
+                   detail=f"{rows:.3g} rows of the phases table, about {_BYTES_PER_PHASE_ROW} bytes each with its CSV "
+                          "text", fix="use fewer phases or bins")
         plan.file(phases_path(args), "--phases-out", sidecar=True)
     cells = "rings" if args.scheme == "rings" else "cartesian"
     grid = _grid(args, PLANES[cells][1])
