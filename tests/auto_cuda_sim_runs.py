@@ -51,7 +51,7 @@ def models() -> dict:
                      dict(common, dt=0.05, t_end=15.0, t_burn=5.0, x0=(0.0, 0.0), histograms={"H": (0.0, 4.0, 40)})),
         "stop": (stop.to_automaton(), "splitting",
                  dict(common, dt=0.05, t_end=15.0, t_burn=5.0, x0=(0.5, 0.0), observables={"H": stop.energy_expr,
-                      "x": "x"}, histograms={"H": (0.0, 4.0, 40), "x": None})),
+                      "x": "x"}, histograms={"H": (0.0, 4.0, 40), "x": (-0.3, 2.7, 30)})),
         "impact_pair": (impact_pair(), "splitting",
                         dict(common, dt=0.02, t_end=6.0, t_burn=1.0, x0=(0.0, 0.0, 0.0, 0.0), events=4,
                              histograms={"H": (0.0, 0.5, 20), "z": (-0.25, 0.25, 20)})),
