@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
-from scipy.special import roots_jacobi
 
 from .methods import ImpactMethod
 
@@ -62,6 +61,8 @@ def cell_quadrature(grid, levels, nu: float, k: int = _CELL_NODES):
     zero = len(levels) > 0 and levels[0] == 0.0
     first = np.zeros(len(a), dtype=bool)
     if nu != 0.0 and a[0] == 0.0:
+        from scipy.special import roots_jacobi  # here only: scipy.special is 0.1-0.2 s of start-up
+
         first[0] = True
         if zero:  # p dH = u**(2 nu) exp(R) 2 u du
             beta = 2.0 * nu + 1.0

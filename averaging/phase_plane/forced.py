@@ -58,8 +58,8 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 import sympy as sp
-from scipy.interpolate import CubicSpline
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ModelError, NormalisationError, ParameterError
 from hybrid.sizes import check_size
 from models import X, Y
@@ -132,6 +132,8 @@ class PeriodicDensity:
         self._points = int(points)
         self.timing = {}
         closed = np.vstack([self.cell_p, self.cell_p[:1]])
+        from scipy.interpolate import CubicSpline  # here only: scipy.interpolate imports scipy.optimize
+
         self._spline = CubicSpline(np.append(self.times, self.period), closed, axis=0, bc_type="periodic")
         w = disc.mass_weight
         self.conservation = float(np.max(np.abs(self.cell_p @ w - 1.0)))
@@ -479,7 +481,7 @@ def periodic_density_xy(model, grid=FORCED_GRID, h_max: float = 4.0, *, steps: i
         disc = Discretisation(g, _coefficients(free, law), law.coefficient, 2, PHASE_ORDER)
         disc.cell_H = g.H_c[g.ring]
         disc.walls_at = (left, right)
-        drift = sp.lambdify((X, Y, T), model.substitute(model.ito_drift + model.g), "numpy")
+        drift = lambdify_numeric((X, Y, T), model.substitute(model.ito_drift + model.g))
         (xr, yr), (xa, ya) = disc.drift_points()
         dt = period / steps
         times = dt * np.arange(steps)

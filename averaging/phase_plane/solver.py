@@ -6,9 +6,9 @@ import time
 import warnings
 
 import numpy as np
-import sympy as sp
 from scipy.interpolate import PchipInterpolator
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ModelError, NormalisationError, ParameterError
 from hybrid.sizes import check_size
 from models import X, Y
@@ -353,8 +353,8 @@ def cell_values_at(model, grid: RingGrid, walls, values, x, y):
 
 def _coefficients(model, law):
     sub = model.substitute
-    m_nc = sp.lambdify((X, Y), sub(model.ito_drift + model.g), "numpy")
-    s2 = sp.lambdify((X, Y), sub(model.diffusion_squared), "numpy")
+    m_nc = lambdify_numeric((X, Y), sub(model.ito_drift + model.g))
+    s2 = lambdify_numeric((X, Y), sub(model.diffusion_squared))
     return Coefficients(model.restoring, model.potential, m_nc, s2, law.coefficient)
 
 

@@ -106,7 +106,7 @@ def run(args) -> int:
                       for k, v in sol.choice.predictions.items())
     print(f"predicted L1 of the candidates: {preds}")
     if args.out is not None:
-        from hybrid.io import write_csv_atomically
+        from hybrid.io import atomic_write_text
         from hybrid.resolution import check_density
         from vibro.provenance import record, write_sidecar
 
@@ -118,7 +118,9 @@ def run(args) -> int:
             check_density(f"p(H) in {args.out}", [sol.H], sol.p, sampled_on=[sol.H], mass=1.0,
                           hint=lambda spreads: "", refine="use vibro pdf with more --points")
 
-        path = write_csv_atomically(sol.to_pandas(), args.out)
+        from .common import csv_text
+
+        path = atomic_write_text(args.out, csv_text({"H": sol.H, "p": sol.p}))
         results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,
                    "estimated_error": sol.estimated_error, "estimate_source": sol.estimate_source,
                    "predictions": sol.choice.predictions,

@@ -22,7 +22,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import sympy as sp
 
 from hybrid.errors import NormalisationError
 from models import Elastic
@@ -146,10 +145,9 @@ def cycle_quantities(model, H):
     """
     from averaging.methods import METHODS
     from averaging.quadrature import OrbitNodes, geometry
-    from models import X, Y
 
     H = np.atleast_1d(np.asarray(H, dtype=float))
-    h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
+    h = model._damping_numeric
     orbit = OrbitNodes(model, H)  # the averaging's singularity-free nodes (int w/s dx over the level)
     x, s = orbit.x, orbit.s
     hp = np.broadcast_to(np.asarray(h(x, s), dtype=float), x.shape)
@@ -162,13 +160,15 @@ def cycle_quantities(model, H):
     return W, T, loss
 
 
-def _reference_density(model, h_max, points=600):
+def _reference_density(model, h_max, points=600, cycles=None):
     """A cheap p(H) to weight the diagnostics: the paper's averaged density of the *elastic* model.
 
-    For linear damping and additive noise this is the exact elastic density T(H) exp(-beta H).
+    For linear damping and additive noise this is the exact elastic density T(H) exp(-beta H). ``cycles``, a dict,
+    receives the :func:`cycle_quantities` computed on the returned energies (so that :func:`diagnose` need not
+    compute them again).
     """
     H = np.linspace(h_max / points, h_max, points)
-    W, T, _ = cycle_quantities(model, H)
+    W, T, loss = cycle_quantities(model, H)
     c = model.linear_damping_constant()
     s2 = model.constant_noise_intensity()
     if c is not None and s2 is not None:
@@ -189,6 +189,8 @@ def _reference_density(model, h_max, points=600):
     logp -= logp.max()
     p = np.exp(logp)
     p /= _trapz(p, H)
+    if cycles is not None:
+        cycles.update(H=H, quantities=(W, T, loss))
     return H, p
 
 
@@ -198,9 +200,7 @@ def _trapz(y, x):
 
 def _feeds_energy(model, h_top: float) -> bool:
     """True when h(x, y) * y < 0 somewhere on the orbits up to energy ``h_top`` (negative damping)."""
-    from models import X, Y
-
-    h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
+    h = model._damping_numeric
     lo, hi = model.turning_points(h_top)  # clipped to the walls, whichever side they are on
     left, right = float(lo), float(hi)
     x = np.linspace(left, right, 101)
@@ -272,9 +272,10 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     law = model.restitution
     vc = float(law.elastic_below()) if model.has_barriers else math.inf
     elastic = bool(law.is_elastic) or not model.has_barriers
+    cycles: dict = {}
     try:
         h_el = _choose_h_max(model)
-        He, pe = _reference_density(model, h_el)
+        He, pe = _reference_density(model, h_el, cycles=cycles)
     except NormalisationError:
         if elastic:
             raise
@@ -320,7 +321,7 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     if h_max is None:
         h_max = float(min(h_el, 1.15 * H[min(int(np.searchsorted(cdf, 1.0 - 1e-5)), len(H) - 1)]))
     h_max = float(h_max)
-    W, T, loss = cycle_quantities(model, H)
+    W, T, loss = cycles["quantities"] if cycles.get("H") is H else cycle_quantities(model, H)
     r_imp = _trapz(p * loss / H, H)
     r_damp = _trapz(p * W / H, H)
     i90 = min(int(np.searchsorted(cdf, 0.9)), len(H) - 1)
