@@ -23,6 +23,7 @@ import numpy as np
 from scipy import sparse
 
 from .methods import ImpactMethod
+from .quadrature import gauss_jacobi
 
 _CELL_NODES = 5
 
@@ -61,18 +62,16 @@ def cell_quadrature(grid, levels, nu: float, k: int = _CELL_NODES):
     zero = len(levels) > 0 and levels[0] == 0.0
     first = np.zeros(len(a), dtype=bool)
     if nu != 0.0 and a[0] == 0.0:
-        from scipy.special import roots_jacobi  # here only: scipy.special is 0.1-0.2 s of start-up
-
         first[0] = True
         if zero:  # p dH = u**(2 nu) exp(R) 2 u du
             beta = 2.0 * nu + 1.0
-            t, w = roots_jacobi(k, 0.0, beta)
+            t, w = gauss_jacobi(k, 0.0, beta)
             ub = np.sqrt(b[0])
             u = 0.5 * ub * (t + 1.0)
             Hs.append(u * u)
             ws.append(2.0 * w * (0.5 * ub) ** (beta + 1.0) / u ** (2.0 * nu))
         else:
-            t, w = roots_jacobi(k, 0.0, nu)
+            t, w = gauss_jacobi(k, 0.0, nu)
             h = 0.5 * b[0] * (t + 1.0)
             Hs.append(h)
             ws.append(w * (0.5 * b[0]) ** (nu + 1.0) / h**nu)

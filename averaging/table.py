@@ -17,7 +17,7 @@ from numpy.polynomial import chebyshev as C
 from hybrid.errors import NormalisationError, ParameterError
 
 from .methods import ImpactMethod
-from .quadrature import DEFAULT_NODES, _gauss, geometry, orbit_integrals
+from .quadrature import DEFAULT_NODES, _gauss, gauss_jacobi, geometry, orbit_integrals
 
 _SIZES = (17, 33, 65, 129, 257, 513)
 _TOL = 1e-13
@@ -29,9 +29,7 @@ _JACOBI: dict = {}
 def _jacobi(n: int, nu: float):
     key = (n, nu)
     if key not in _JACOBI:
-        from scipy.special import roots_jacobi  # here only: scipy.special is 0.1-0.2 s of start-up
-
-        _JACOBI[key] = roots_jacobi(n, 0.0, nu) if nu != 0.0 else _gauss(n)
+        _JACOBI[key] = gauss_jacobi(n, 0.0, nu) if nu != 0.0 else _gauss(n)
     return _JACOBI[key]
 
 

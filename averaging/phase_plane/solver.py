@@ -6,7 +6,6 @@ import time
 import warnings
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ModelError, NormalisationError, ParameterError
@@ -16,6 +15,7 @@ from models import X, Y
 from ..stationary import check_energy_range, output_grid
 from ._core import Coefficients, Discretisation
 from ._grid import RingGrid
+from ._monotone import MonotoneCubic
 
 DEFAULT_GRID = (160, 192)
 """(rings in H, angles per ring): L1 discretisation error of p(H) below 1e-3 on the paper's cases."""
@@ -96,7 +96,7 @@ class PhaseDensity:
         scale = float(np.max(abs(disc.A) @ np.abs(p)))
         self.residual = float(np.max(np.abs(Ap)) / scale) if scale > 0 else 0.0
         self.conservation = float(np.max(np.abs(np.asarray(disc.A.sum(axis=0)))))
-        self._cdf = PchipInterpolator(grid.H_faces, np.concatenate([[0.0], np.cumsum(self.ring_mass)]))
+        self._cdf = MonotoneCubic(grid.H_faces, np.concatenate([[0.0], np.cumsum(self.ring_mass)]))
         self._pdf = self._cdf.derivative()
         self.mean_energy = float(np.sum(self.cell_mass * self.cell_H))
         self.mean_x2 = float(np.sum(self.cell_mass * self.cell_x**2))

@@ -69,7 +69,7 @@ def csv_text(columns: dict) -> str:
     Examples
     --------
     >>> csv_text({"H": [0.5, 1.0], "p": [0.25, 1e-20]})
-    'H,p\\n0.5,0.25\\n1,1.0000000000000001e-20\\n'
+    'H,p\\n0.5,0.25\\n1,9.9999999999999995e-21\\n'
     """
     import numpy as np
 
