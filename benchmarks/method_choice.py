@@ -185,19 +185,25 @@ def ratings_section():
 
     m = error_model()
     out = ["## The ratings behind the choice", "", m.get("ratings_source", ""), "",
-           "Predicted L1 = A (r_imp + 1e-4)^a (r_damp + 1e-4)^b (r_imp, r_damp: the diagnostics' impact loss and "
-           "damping work per cycle over H); `coverage` is the share of the family's sweep cases it bounds, `held "
-           "out` the same for the out-of-fold (4-fold) prediction times the safety factor; `over` the median of "
+           "Predicted L1 = exp(log_scale + coef . features) (:func:`vibro.solve.errormodel.rating_features`; "
+           "r_imp, r_damp: the diagnostics' impact loss and damping work per cycle over H); `scale` = "
+           "exp(log_scale) of the wall family; `coverage` is the share of the family's sweep cases it bounds, "
+           "`held out` the same for the out-of-fold prediction times the safety factor; `over` the median of "
            "predicted over measured; outside the box of the sweep's (r_imp, r_damp) no rating is claimed.", "",
-           "| method | walls | cases | A | a | b | coverage | held out | over | median L1 | max L1 |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "| method | walls | cases | scale | coverage | held out | over | median L1 | max L1 |",
+           "|---|---|---|---|---|---|---|---|---|"]
     import math
 
+    coefs = []
     for meth, fams in m.get("ratings", {}).items():
         for fam, r in fams.items():
-            out.append(f"| {meth} | {fam} | {r['cases']} | {math.exp(r['log_scale']):.3g} | {r['exp_imp']:.2f} | "
-                       f"{r['exp_damp']:.2f} | {r['coverage']:.2f} | {r['held_out_coverage']:.2f} | "
-                       f"{r['median_over_prediction']:.1f} | {r['median_l1']:.4f} | {r['max_l1']:.4f} |")
+            out.append(f"| {meth} | {fam} | {r['cases']} | {math.exp(r['log_scale']):.3g} | {r['coverage']:.2f} | "
+                       f"{r['held_out_coverage']:.2f} | {r['median_over_prediction']:.1f} | {r['median_l1']:.4f} | "
+                       f"{r['max_l1']:.4f} |")
+        if fams and "coef" in next(iter(fams.values())):
+            r = next(iter(fams.values()))
+            coefs.append(f"- {meth}: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(r["features"], r["coef"])))
+    out += ["", "Coefficients (shared by the wall families of a method):", "", *coefs]
     f = m["fpk"]
     out += ["", f"fpk: predicted estimate at the default grid {f['floor']:.2g} ({f['source']}).", ""]
     return out

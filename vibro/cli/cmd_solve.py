@@ -26,9 +26,10 @@ def register(subparsers) -> None:
         "solve", help="stationary p(H) by the cheapest method whose estimated error meets --tol (exact, paper, jump, "
                       "chain, fpk or Monte Carlo), with the estimate after the run",
         description="Consider, cheapest first: exact (the elastic Gibbs density, when impacts are elastic at every "
-                    "reachable speed, the damping linear and the noise additive); paper, jump and chain (energy-"
-                    "envelope averaging: the impact loss as a drift, as Poisson-timed jumps, or as jumps once per "
-                    "flight; milliseconds to 0.1 s), each with a rating of its L1 error measured against the phase-"
+                    "reachable speed, the damping linear and the noise additive); chain, paper and jump (energy-"
+                    "envelope averaging: the impact loss as jumps once per flight, as a drift, or as Poisson-timed "
+                    "jumps; milliseconds to 0.1 s; paper and jump are checked against the chain after the run, so "
+                    "the chain comes first), each with a rating of its L1 error measured against the phase-"
                     "plane solver over a sweep of models (benchmarks/method_ratings.py; not rated outside it); fpk "
                     "(the full (x, y) Fokker-Planck equation with impacts as boundary conditions, 0.1-2 s, on the "
                     "coarsest grid predicted to meet --tol, with its own three-grid error estimate); Monte Carlo only "

@@ -5,7 +5,8 @@
 1. **exact**: the impacts are elastic at every *reachable* impact speed (law elastic, or V_C so high that the
    stationary impact-speed tail P(|v| > V_C) under the elastic density is below tol/10), the damping is linear
    (h = c*y) and the noise additive. Then p(H) is proportional to T(H) exp(-2cH/sigma**2), exactly.
-2. **paper**, **jump**, **chain** (energy-envelope averaging; milliseconds, about 0.1 s for chain): their error is
+2. **chain**, **paper**, **jump** (energy-envelope averaging; milliseconds, about 0.1 s for chain; paper and jump
+   are checked against the chain after the run, so the chain, the most accurate, is also the cheapest): their error is
    rated against the phase-plane solver over a sweep of models (``benchmarks/method_ratings.py``, per wall
    family: symmetric, asymmetric, one-sided, equilibrium; self-excited damping included). A method is a candidate
    where a rating covers the model (:func:`~vibro.solve.errormodel.rating`), and chosen when its rating meets tol.
@@ -181,7 +182,25 @@ FPK_PREDICT_ORDER = 1.75
 """Order by which fpk's estimate is predicted to fall with the grid (fitted on Fig. 2, benchmarks/fpk_convergence.py);
 the run's own estimate decides, and a miss refines the grid."""
 COSTS = {"exact": 0.02, "paper": 0.05, "jump": 0.05, "chain": 0.15}
-"""Wall time (s) of each averaging density at 2000 points (the diagnostics already spent), for ordering."""
+"""Wall time (s) of each averaging density at 2000 points (the diagnostics already spent)."""
+CROSS_CHECKED = ("paper", "jump")
+"""Averaging methods whose result ``solve`` checks against the chain after the run (so they cost the chain too)."""
+
+
+def method_cost(name: str) -> float:
+    """Wall time (s) of averaging method ``name`` in ``solve``: its density, plus the chain's for the a-posteriori
+    cross-check of ``paper`` and ``jump``; so the chain, the most accurate of the three, is never the dearer.
+
+    Examples
+    --------
+    >>> method_cost("chain") < method_cost("jump")
+    True
+    """
+    return COSTS[name] + (COSTS["chain"] if name in CROSS_CHECKED else 0.0)
+
+
+AVERAGING_ORDER = tuple(sorted(("paper", "jump", "chain"), key=method_cost))
+"""The averaging methods, cheapest (in ``solve``, cross-check included) first."""
 
 
 def fpk_grid_for(tol: float, start=None) -> tuple[int, int]:
@@ -269,11 +288,11 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
         reasons.append("no rating of the averaging methods covers this model (its wall family, noise or loss "
                        "ratios lie outside the sweep of benchmarks/method_ratings.py)")
     else:
-        for name in ("paper", "jump", "chain"):  # cheapest first
+        for name in AVERAGING_ORDER:  # cheapest first
             if preds[name] <= tol:  # False for NaN (not rated)
                 why = (f"its rating against fpk ({_family(diag)} walls, impacts lose {diag.r_imp:.3f} H and damping "
                        f"{diag.r_damp:.3f} H per cycle) is {preds[name]:.3g} <= tol")
-                return Choice(name, why, preds[name], COSTS[name], {}, preds, diag)
+                return Choice(name, why, preds[name], method_cost(name), {}, preds, diag)
         rated = ", ".join(f"{n} {preds[n]:.3f}" for n in ("paper", "jump", "chain") if math.isfinite(preds[n]))
         reasons.append(f"no averaging method is rated within tol={tol:g} ({rated})")
     grid = fpk_grid_for(tol)

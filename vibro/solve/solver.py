@@ -11,7 +11,7 @@ import numpy as np
 
 from hybrid.errors import ModelError, ParameterError, VibroWarning
 
-from .choice import Choice, averaging_cost, check_request, choose, fpk_grid_for, mc_choice
+from .choice import Choice, averaging_cost, check_request, choose, fpk_grid_for, mc_choice, method_cost
 from .diagnostics import diagnose
 from .errormodel import L1_BINS, bias_constants, predict_averaging_error
 from .metrics import bin_masses, l1_between_histograms, rebin_counts
@@ -252,7 +252,7 @@ def _escalate(choice: Choice, estimated: float, tol: float) -> Choice | None:
                           preds.get("fpk", math.nan), fpk_cost(grid), {"grid": grid}, preds, choice.diagnostics)
         if preds.get(name, math.nan) <= tol:
             return Choice(name, choice.reason + f"; {choice.method}'s estimate {estimated:.3g} missed tol",
-                          preds[name], averaging_cost(), {}, preds, choice.diagnostics)
+                          preds[name], method_cost(name), {}, preds, choice.diagnostics)
     return None
 
 
