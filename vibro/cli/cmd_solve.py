@@ -83,9 +83,13 @@ def run(args) -> int:
     if args.dry_run:
         if args.method != "auto":
             raise ParameterError("--dry-run reports the automatic choice; drop --method")
+        from hybrid.errors import ModelError
         from vibro.solve import diagnose
 
-        diag = diagnose(model, args.h_max)
+        try:
+            diag = diagnose(model, args.h_max)
+        except ModelError:  # no averaging (several wells, forcing): choose says what applies instead
+            diag = None
         print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False,
                      diagnostics=diag).summary())
         return 0

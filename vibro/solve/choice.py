@@ -267,6 +267,9 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     try:
         diag = diagnostics if diagnostics is not None else diagnose(model)
     except ModelError as exc:
+        several = multiwell_choice(model, tol, str(exc))
+        if several is not None:
+            return several
         return mc_choice(model, tol, None, f"no deterministic method applies ({exc})", {}, max_cost, mc_pilot, seed)
     preds = {}
     reasons = []
@@ -305,6 +308,50 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     why = "; ".join(reasons) + (f"; the phase-plane FPK solver (impacts as boundary conditions) on grid {grid} "
                                 "carries its own three-grid error estimate")
     return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
+
+
+def multiwell_choice(model, tol: float, why: str) -> Choice | None:
+    """fpk on Cartesian cells for an autonomous model whose potential has several wells, or None.
+
+    The energy-envelope methods and fpk's rings need one well (one closed orbit per energy); the Cartesian
+    discretisation of :mod:`averaging.phase_plane.cartesian` does not. It is chosen where the damping is linear and
+    the noise additive (then exp(-beta H), beta = 2c/sigma**2, bounds the tail, so the energy range is known before
+    the run: up to 14/beta, fitted down to the mass by the solver); its two-grid estimate is checked after the run
+    and the grid refined while it misses. Energies start at min G (negative between the wells of a double well),
+    so the L1 bins cover [min G, h_max]. None (Monte Carlo) for other models, e.g. nonlinear damping.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> bistable = ImpactOscillator("-x + x**3/4", "c*y", parameters={"c": 1.0, "D": 0.5}, barriers=None)
+    >>> ch = multiwell_choice(bistable, 0.01, "not a single well")
+    >>> ch.method, ch.settings["scheme"], round(ch.settings["h_min"], 6)
+    ('fpk', 'cartesian', -1.0)
+    """
+    if model.is_forced:
+        return None
+    from averaging.phase_plane._cartesian import confining_range
+    from averaging.phase_plane.solver import is_single_well
+
+    c = model.linear_damping_constant()
+    s2 = model.constant_noise_intensity()
+    if is_single_well(model) or c is None or s2 is None or not (c > 0 and s2 > 0):
+        return None
+    h_max = 14.0 * s2 / (2.0 * c)
+    walls = [float(b) if math.isfinite(b) else None for b in model.barriers]
+    try:
+        _, _, g_min = confining_range(model.potential, h_max, *walls)
+    except ModelError:
+        return None
+    grid = fpk_grid_for(tol)
+    expected = fpk_typical() * (160.0 / grid[0]) ** FPK_PREDICT_ORDER
+    diag = Diagnostics(True, True, bool(model.restitution.is_elastic), math.nan, math.nan, math.nan, math.nan,
+                       math.nan, math.nan, h_max, math.nan, ["several wells: no averaging"], geometry="several wells")
+    reason = (f"the averaging methods and fpk's rings do not apply ({why}); the phase-plane FPK solver on Cartesian "
+              f"cells (any number of wells) on grid {grid} carries its own two-grid error estimate")
+    preds = {"exact": math.inf, "paper": math.inf, "jump": math.inf, "chain": math.inf, "fpk": expected}
+    return Choice("fpk", reason, expected, fpk_cost(grid),
+                  {"grid": grid, "scheme": "cartesian", "h_min": float(g_min), "h_max": h_max}, preds, diag)
 
 
 def _family(diag) -> str:
