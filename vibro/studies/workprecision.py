@@ -391,7 +391,7 @@ def averaging_caption(df) -> str:
     >>> import pandas as pd
     >>> df = pd.DataFrame({"method": ["fpk"], "wall_time": [0.1], "l1": [1e-3]})
     >>> df.attrs.update(reference="fpk 320x384", reference_estimate=2e-4, mc_cross_check=4e-3, mc_reference_noise=3e-3)
-    >>> "fpk 320x384" in averaging_caption(df)
+    >>> "fpk on 320x384" in averaging_caption(df)
     True
     """
     a = df.attrs
