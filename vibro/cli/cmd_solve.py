@@ -32,8 +32,10 @@ def register(subparsers) -> None:
                     "the chain comes first), each with a rating of its L1 error measured against the phase-"
                     "plane solver over a sweep of models (benchmarks/method_ratings.py; not rated outside it); fpk "
                     "(the full (x, y) Fokker-Planck equation with impacts as boundary conditions, 0.1-2 s, on the "
-                    "coarsest grid predicted to meet --tol, with its own three-grid error estimate); Monte Carlo only "
-                    "where none of these applies (forced or multi-well models; dt and paths planned from the "
+                    "coarsest grid predicted to meet --tol, with its own three-grid error estimate; on Cartesian "
+                    "cells for a potential with several wells, linear damping and additive noise, with a two-grid "
+                    "estimate, L1 then on [min G, h_max]); Monte Carlo only where none of these applies (forced "
+                    "models, several wells with nonlinear damping; dt and paths planned from the "
                     "scheme's bias constant and a pilot run). Runs the cheapest one predicted to meet --tol, then "
                     "reports the error estimated after the run and how it was made; when that misses --tol it "
                     "escalates (a finer fpk grid, or the next method). L1 is measured on 40 bins of [0, h_max].",

@@ -12,8 +12,10 @@
    where a rating covers the model (:func:`~vibro.solve.errormodel.rating`), and chosen when its rating meets tol.
 3. **fpk**, the phase-plane solver of the full (x, y) problem, on the coarsest grid of :data:`FPK_GRIDS` predicted
    to meet tol; it carries its own a-posteriori estimate (three grids), so it is the method for models no rating
-   covers, and :func:`~vibro.solve.solve` refines its grid when the estimate misses.
-4. **Monte Carlo** only where no deterministic method applies (a forced or multi-well model), planned by
+   covers, and :func:`~vibro.solve.solve` refines its grid when the estimate misses. A potential with several
+   wells (linear damping, additive noise) gets fpk on Cartesian cells (:func:`multiwell_choice`).
+4. **Monte Carlo** only where no deterministic method applies (a forced model, several wells with nonlinear
+   damping or multiplicative noise), planned by
    :mod:`vibro.solve.planner`.
 
 Averaging is refused only where no rating covers the model and the 90th-percentile energy loses more than
