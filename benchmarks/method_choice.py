@@ -173,10 +173,25 @@ def write_page(rows):
             lines.append(f"| {r['case']} | {r['method']} | {r['estimate']:.2g} | {r['true']:.2g} | "
                          f"{r['ref_est']:.0e} | {r['cpu_s']:.2f} | {r['wall_s']:.2f} | {r['escalated'] or '-'} |")
         lines.append("")
-    lines += ratings_section() + fpk_estimate_section()
+    lines += startup_section() + ratings_section() + fpk_estimate_section()
     PAGE.parent.mkdir(parents=True, exist_ok=True)
     PAGE.write_text("\n".join(lines) + "\n")
     print(f"wrote {PAGE}")
+
+
+def startup_section():
+    """CPU time of solve against the commit before the start-up work (benchmarks/solve_startup.py writes it)."""
+    path = ROOT / "benchmarks" / "data" / "solve_startup.json"
+    if not path.exists():
+        return []
+    d = json.loads(path.read_text())
+    out = ["## Start-up against a baseline", "",
+           f"`benchmarks/solve_startup.py --baseline` (a source tree of commit {d['baseline']}): `vibro solve --tol "
+           f"{d['tol']:g}` on a case of each figure, the current tree and the baseline alternating, "
+           f"{d['repeats']} runs each, median CPU time (user + system). {d['summary']}.", "",
+           "| case | current CPU (s) | baseline CPU (s) | ratio |", "|---|---|---|---|"]
+    out += [f"| {label} | {cur:.2f} | {base:.2f} | {cur / base:.2f} |" for label, cur, base in d["rows"]]
+    return out + [""]
 
 
 def ratings_section():

@@ -15,6 +15,7 @@ Run: ``nice -n 10 python benchmarks/solve_startup.py --baseline /tmp/vibro-base 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import subprocess
@@ -27,6 +28,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+RESULT = ROOT / "benchmarks" / "data" / "solve_startup.json"
+"""The last run's figures, which benchmarks/method_choice.py puts on docs/results/method-choice.md."""
 CASES = ("f2_1", "f6_1", "f10_1", "f11_1", "f12_1", "f13_1", "f14_1", "OneSidedStop")
 """A sample of the acceptance cases of benchmarks/method_choice.py (one per figure, and the one-sided stop)."""
 
@@ -45,6 +48,7 @@ def main(argv=None) -> None:
     ap.add_argument("--baseline", required=True, type=Path, help="source tree of the baseline commit")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--tol", type=float, default=0.02)
+    ap.add_argument("--baseline-name", default=None, help="what the baseline is, for the page (e.g. its commit)")
     args = ap.parse_args(argv)
     if not (args.baseline / "vibro" / "__main__.py").exists():
         sys.exit(f"solve_startup: {args.baseline} holds no vibro source tree")
@@ -74,9 +78,14 @@ def main(argv=None) -> None:
         imp = {name: float(np.median([cpu_of(imports, tree, tmp) for _ in range(args.repeats)]))
                for name, tree in trees.items()}
     cur, base = np.median([r[1] for r in rows]), np.median([r[2] for r in rows])
-    print(f"median over {len(rows)} cases (tol {args.tol:g}): current {cur:.2f} s, baseline {base:.2f} s CPU, ratio "
-          f"{cur / base:.2f}; imports alone: current {imp['current']:.2f} s, baseline {imp['baseline']:.2f} s; "
-          f"load average {os.getloadavg()[0]:.1f}")
+    line = (f"median over {len(rows)} cases (tol {args.tol:g}): current {cur:.2f} s, baseline {base:.2f} s CPU, ratio "
+            f"{cur / base:.2f}; imports alone: current {imp['current']:.2f} s, baseline {imp['baseline']:.2f} s; "
+            f"load average {os.getloadavg()[0]:.1f}")
+    print(line)
+    baseline_name = args.baseline_name or args.baseline.name
+    RESULT.write_text(json.dumps({"baseline": baseline_name, "tol": args.tol, "repeats": args.repeats,
+                                  "rows": rows, "summary": line}, indent=1) + "\n")
+    print(f"wrote {RESULT}")
 
 
 if __name__ == "__main__":
