@@ -20,7 +20,7 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from hybrid.automaton import real_symbol
+from hybrid.automaton import lambdify_numeric, real_symbol
 from hybrid.errors import (
     CheckpointError,
     HistogramRangeWarning,
@@ -219,7 +219,7 @@ def _check_noise(model, h_max: float = 4.0) -> None:
     xx, yy = np.meshgrid(xs, ys)
     with np.errstate(all="ignore"):
         try:
-            val = np.broadcast_to(np.asarray(sp.lambdify((X, Y), s2, "numpy")(xx, yy), dtype=float), xx.shape)
+            val = np.broadcast_to(np.asarray(lambdify_numeric((X, Y), s2)(xx, yy), dtype=float), xx.shape)
         except (TypeError, ValueError) as exc:
             raise ParameterError(f"the noise gives sigma^2 = {s2}, which is not a real number ({exc})") from None
     bad = ~(val >= 0.0)
