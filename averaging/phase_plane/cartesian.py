@@ -9,7 +9,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator, RectBivariateSpline
 
 from hybrid.errors import ParameterError
 from hybrid.sizes import check_size
@@ -25,6 +24,7 @@ from ._cartesian import (
     point_values,
 )
 from ._core import null_vector
+from ._monotone import MonotoneCubic
 from .solver import BYTES_PER_CELL, SECONDS_PER_CELL, PhaseDensity, _coefficients, _walls, grid_pair
 
 CARTESIAN_GRID = (120, 120)
@@ -76,7 +76,7 @@ class CartesianDensity(PhaseDensity):
         cdf = np.maximum.accumulate(cdf)
         self.H_faces = faces
         self.ring_mass = np.diff(cdf)
-        self._cdf = PchipInterpolator(faces, cdf)
+        self._cdf = MonotoneCubic(faces, cdf)
         self._pdf = self._cdf.derivative()
         self.mean_energy, self.mean_x2, self.mean_y2 = moments(grid, model.potential, p, px, py)[:3]
         wall_H = [float(model.potential(np.array([x]))[0]) for x in grid.walls.values()]
@@ -91,6 +91,8 @@ class CartesianDensity(PhaseDensity):
         full = np.zeros((grid.nx, grid.ny))
         full[grid.i, grid.j] = point_values(grid, p)
         bbox = [grid.x_faces[0], grid.x_faces[-1], grid.y_faces[0], grid.y_faces[-1]]
+        from scipy.interpolate import RectBivariateSpline  # here: it imports scipy.optimize and scipy.special
+
         self._spline = RectBivariateSpline(grid.xc, grid.yc, full, bbox=bbox, kx=3, ky=3, s=0)
         self.H = np.array([])
         self.p = np.array([])
