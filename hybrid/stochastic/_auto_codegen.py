@@ -48,10 +48,12 @@ from hybrid.errors import ModelError
 from ._codegen import _Printer
 
 TEMPLATE_VERSION = "6"
-SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4}
+SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4, "naive": 5}
 """The generated module's ``SCHEME``: Euler-Maruyama, Milstein (commutative noise), splitting (kick, free flight,
 noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight), BAOAB (kick by
-the force, half flight, exact Ornstein-Uhlenbeck step of the velocities, half flight, kick)."""
+the force, half flight, exact Ornstein-Uhlenbeck step of the velocities, half flight, kick), naive (the velocities'
+Euler-Maruyama step, then the positions' flight; at a crossing the reset is applied where the flight meets the guard
+and the rest of the step is dropped: the event time is wrong by up to a step, the anti-pattern kept for charts)."""
 MAX_EVENTS = 64
 """Events handled within one time step; more are counted as ``event_overflow`` (chattering or Zeno)."""
 TIME = real_symbol("t")
@@ -396,8 +398,9 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
         block(lines, [f"_y{i}" for i in range(n)], [xs[i] + increment(i, scheme == "milstein") for i in range(n)],
               "a")
     else:
-        if scheme == "symplectic":  # velocities by a Milstein step, then the positions' flight at the new ones
-            block(lines, [f"_y{i}" for i in vel], [xs[i] + increment(i, True) for i in vel], "a")
+        if scheme in ("symplectic", "naive"):  # velocities by a Milstein (naive: Euler-Maruyama) step, then the
+            # positions' flight at the new ones
+            block(lines, [f"_y{i}" for i in vel], [xs[i] + increment(i, scheme == "symplectic") for i in vel], "a")
         else:  # splitting: kick, free flight (positions only, at the kicked velocities), noise, kick
             block(lines, [f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
             # the noise and the closing kick at the end of the step (as in the event loop)
@@ -536,8 +539,9 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
         n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
-        opening=ind(_LOCATED_OPENING if located else _PLAIN_OPENING, " " * 4),
-        fire=ind(_FIRE.format(when="t + best_s * tau"), " " * 12),
+        opening=ind(_NAIVE_OPENING if scheme == "naive" else _LOCATED_OPENING if located else _PLAIN_OPENING,
+                    " " * 4),
+        fire=ind(_FIRE.format(when="t + best_s * tau") + (_NAIVE_DROP if scheme == "naive" else ""), " " * 12),
         o_step=ind(_LOCATED_O_STEP if located else _PLAIN_O_STEP, " " * 12),
         closing=ind(_LOCATED_CLOSING if located else _PLAIN_CLOSING, " " * 4),
         first=tuple(first) + (0,), count=tuple(count) + (0,), targets=tuple(targets) + (0,),
@@ -1073,6 +1077,23 @@ elif SCHEME == 3:
     for kv in range(N_POS):
         x[VEL[kv]] += xr[VEL[kv]]
 n_ev = 0"""
+
+
+_NAIVE_OPENING = """\
+# naive: the velocities' Euler-Maruyama step first (drift and noise at the start)
+drift(mode, x, t, p, f)
+noise(mode, x, t, p, G)
+for kv in range(N_POS):
+    i = VEL[kv]
+    acc = f[i] * dt
+    for k in range(M):
+        acc += G[i * M + k] * dw[k]
+    x[i] += acc
+n_ev = 0"""
+
+
+_NAIVE_DROP = """
+frac = 0.0  # naive: the rest of the step's flight is dropped (the event time is wrong by up to a step)"""
 
 
 _FIRE = """\

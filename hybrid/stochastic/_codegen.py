@@ -59,6 +59,16 @@ class _Printer(PythonCodePrinter):
     def _print_Float(self, expr):
         return repr(float(expr))
 
+    def _print_Function(self, expr):
+        # a restitution law given as a Python callable: the module binds the numba-compiled callable to this name
+        if type(expr).__name__ == USER_LAW:
+            return f"{USER_LAW}({', '.join(self._print(a) for a in expr.args)})"
+        return super()._print_Function(expr)
+
+
+USER_LAW = "_user_law"
+"""The name under which a generated module calls a restitution law given as a Python callable (numba-compiled)."""
+
 
 @dataclass
 class Emitter:

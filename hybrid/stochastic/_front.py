@@ -40,8 +40,13 @@ _SUMMED = ("x2", "y2", "below")
 _JOINT = ("x", "y")  # the joint histogram's coordinates: neither summed nor histogrammed on their own
 
 
-AUTOMATON_SCHEME_OF = {"milstein": "symplectic", "splitting": "baoab"}
+AUTOMATON_SCHEME_OF = {"milstein": "symplectic", "splitting": "baoab", "em": "em", "naive": "naive"}
 """The automaton scheme that takes each oscillator scheme's steps (same draws, same order of operations).
+
+``em`` is the automaton's Euler-Maruyama on the straight segment of the step (for an oscillator: the position's
+flight at the old velocity, the velocity's increment spread linearly over the step); after a crossing the rest of
+the step is a fresh Euler-Maruyama step of what is left of it from the reset state. ``naive`` drops the rest of the
+step at a crossing.
 
 Examples
 --------
@@ -51,18 +56,17 @@ Examples
 
 
 def reproduces(model, scheme) -> bool:
-    """True when the automaton kernel reproduces ``scheme`` on ``model`` (milstein or splitting, with a law given
-    as an expression).
+    """True when the automaton kernel reproduces ``scheme`` on ``model`` (a scheme of :data:`AUTOMATON_SCHEME_OF`
+    that admits the model).
 
     Examples
     --------
     >>> from models import DuffingImpact
     >>> from hybrid.stochastic import SCHEMES
     >>> reproduces(DuffingImpact(), SCHEMES["splitting"]), reproduces(DuffingImpact(), SCHEMES["em"])
-    (True, False)
+    (True, True)
     """
-    if not (scheme.name in AUTOMATON_SCHEME_OF and getattr(model.restitution, "callable", None) is None
-            and model.energy_expr is not None):
+    if not (scheme.name in AUTOMATON_SCHEME_OF and model.energy_expr is not None):
         return False
     try:  # a model the scheme refuses stays on the oscillator path, which says why in the scheme's own words
         scheme.check(model)
@@ -140,7 +144,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     t0 = time.perf_counter()
     auto_scheme = AUTOMATON_SCHEME_OF[scheme]
     automaton, observables, src, st = _generated(model, auto_scheme)
-    name = f"vibro_auto_{auto_scheme}_{_auto_codegen.kernel_key(src)}"
+    name, user_law = kernel_name(model, auto_scheme, src)
     s = settings
     n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
     npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
@@ -164,15 +168,53 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
         j_lo=np.array([xlo, ylo], dtype=float), j_scale=np.array(xy_scales, dtype=float),
         j_bins=np.array([nx, ny], dtype=np.int64), v_scale=v_scale, v_bins=s["v_bins"], phases=0, phase_steps=1,
     )
-    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes, label=f"{model.name}/{auto_scheme}")
+    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes, label=f"{model.name}/{auto_scheme}",
+                                  user_law=user_law)
     module = job.module()
     job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
-    # the law's numbers in full precision (they are parameters of the kernel, not in its source)
-    law = [float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")]
+    # the law's numbers in full precision (they are parameters of the kernel, not in its source); a callable's code
+    fn = getattr(model.restitution, "callable", None)
+    law = ([float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")] if fn is None
+           else [_codegen.callable_digest(fn)])
     key = hashlib.sha256((src + _codegen.dependency_hash(src)).encode()).hexdigest()[:32]
     identity = {"kernel": key, "law": [model.restitution.spec(), *law]}
     kern = AutomatonKernel(module, identity, time.perf_counter() - t0)
     return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
+
+
+_USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused
+
+
+def kernel_name(model, scheme: str, src: str) -> tuple[str, object | None]:
+    """The module name of the automaton kernel ``src`` and, for a restitution law given as a Python callable, the
+    callable compiled by numba (the module is then built in memory, its name carrying the callable's id).
+
+    The source of such a kernel calls ``_user_law`` and is the same for every callable law, as the source of an
+    expression law is the same for every value of its numbers; the module binds the compiled callable.
+    """
+    name = f"vibro_auto_{scheme}_{_auto_codegen.kernel_key(src)}"
+    fn = getattr(model.restitution, "callable", None)
+    if fn is None:
+        return name, None
+    _, _, jitted = _codegen._law_code(model.restitution)  # a one-line RestitutionError where numba cannot
+    _USER_LAWS.setdefault(id(fn), fn)
+    return f"{name}_law{id(fn):x}", jitted
+
+
+def with_user_law(automaton):
+    """``automaton`` with the walls' numerical reset (a callable restitution law) made symbolic: y -> -e(|y|) y
+    with e the function :data:`~hybrid.stochastic._codegen.USER_LAW` that the kernel binds, checked in (0, 1]."""
+    from hybrid.automaton import HybridAutomaton, Transition
+
+    e = sp.Function(_codegen.USER_LAW)(sp.Abs(_Y))
+    transitions = [Transition(t.name, t.source, t.target, t.guard, t.direction, (_X, _Y), t.priority)
+                   for t in automaton.transitions]
+    out = HybridAutomaton(automaton.states, dict(automaton.parameters), list(automaton.modes), transitions,
+                          initial_mode=automaton.initial_mode, observables=dict(automaton.observables))
+    for tr in transitions:  # set past the declaration's checks, which refuse unknown functions in a user's model
+        object.__setattr__(tr, "reset", (_X, -e * _Y))
+        object.__setattr__(tr, "check", sp.And(e > 0, e <= 1))
+    return out
 
 
 _GENERATED: dict = {}
@@ -181,14 +223,16 @@ _GENERATED: dict = {}
 def _generated(model, scheme: str = "symplectic"):
     """The lifted automaton, its observables, the kernel source and structure of ``model`` (memoised: the sympy
     work costs 40-90 ms, as much as a short run)."""
-    law = sp.sympify(model.restitution.expression(sp.Abs(_Y)))
+    user = getattr(model.restitution, "callable", None) is not None
+    law = (sp.Function(_codegen.USER_LAW)(sp.Abs(_Y)) if user
+           else sp.sympify(model.restitution.expression(sp.Abs(_Y))))
     # srepr keeps every float in full precision (str and the fingerprint keep 15 digits)
     declared = (model.g, model.h, tuple(model.f), sp.Matrix(model.intensity), model.epsilon, model.barrier_exprs)
     key = (scheme, type(model).__name__, sp.srepr(declared), type(model.restitution).__name__, sp.srepr(law),
            tuple(float.hex(float(a)) for a in sp.preorder_traversal(law) if isinstance(a, sp.Float)),
            tuple((k, float.hex(float(v))) for k, v in model.params.items()))
     if key not in _GENERATED:
-        automaton = lift_law_numbers(model.to_automaton())
+        automaton = with_user_law(model.to_automaton()) if user else lift_law_numbers(model.to_automaton())
         energy = model.energy_expr
         walls = [b for b in (model.barrier_exprs or ()) if b.is_finite is not False and b not in (sp.oo, -sp.oo)]
         if walls:
@@ -197,8 +241,9 @@ def _generated(model, scheme: str = "symplectic"):
         else:
             below = sp.Integer(1)
         observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
+        # a callable law's module is built in memory: numba cannot cache its machine code on disk
         src, st = _auto_codegen.generate_source(automaton, scheme, observables, summed=_SUMMED,
-                                                joint_only=_JOINT)
+                                                joint_only=_JOINT, cache=not user)
         if len(_GENERATED) > 256:
             _GENERATED.clear()
         _GENERATED[key] = (automaton, observables, src, st)
