@@ -419,9 +419,23 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     out = np.empty((dws.shape[0], n))
     elog = np.full((dws.shape[0], n_log, 3), np.nan)
     nlog = np.zeros(dws.shape[0], dtype=np.int64)
+    bad = np.zeros(3)
     module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
-                 out, elog, nlog)
+                 out, elog, nlog, bad)
+    _warn_driven(bad)
     return (out, elog, nlog) if n_log else out
+
+
+def _warn_driven(bad) -> None:
+    """Say what ``drive`` counted: firings whose check failed, steps over the cap of events."""
+    from hybrid.errors import VibroWarning
+
+    if bad[0]:
+        warnings.warn(f"{int(bad[0])} firings failed their transition's check (first at speed {bad[1]:.4g}): the "
+                      "reset is outside what the model declares valid there", VibroWarning, stacklevel=3)
+    if bad[2]:
+        warnings.warn(f"{int(bad[2])} steps hit the cap of {_auto_codegen.MAX_EVENTS} events (chattering or a Zeno "
+                      "accumulation inside one step); reduce dt", ChatteringWarning, stacklevel=3)
 
 
 def _as_float(name, value, positive=True):
