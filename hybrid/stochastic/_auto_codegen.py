@@ -534,7 +534,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         phase_block=ind(_PHASES.format(pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 8))
                         if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
                         " " * 12),
-        load=step["load"],
+        **step,  # the lane step's pieces stay fields of the module template too
         to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
         observe=ind(observe, " " * 16),
         fast_checks_set=fast_checks_set,
