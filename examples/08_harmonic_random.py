@@ -1,5 +1,5 @@
 """Harmonic plus random forcing: phase-resolved (Poincaré-section) densities by Monte Carlo and by the fpk solver.
-==============================================================================================================
+===============================================================================================================
 
     x'' + c x' + a x + b x^3 = A cos(Omega t) + sqrt(2 D) xi(t),   ``|x| < delta``,   Newton impacts v+ = -r v-
 

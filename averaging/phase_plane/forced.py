@@ -75,8 +75,8 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 import sympy as sp
-from scipy.interpolate import CubicSpline
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ModelError, NormalisationError, ParameterError
 from hybrid.sizes import check_size
 from models import X, Y
@@ -178,6 +178,8 @@ class PeriodicDensity:
         self._points = int(points)
         self.timing = {}
         closed = np.vstack([self.cell_p, self.cell_p[:1]])
+        from scipy.interpolate import CubicSpline  # here only: scipy.interpolate imports scipy.optimize
+
         self._spline = CubicSpline(np.append(self.times, self.period), closed, axis=0, bc_type="periodic")
         self.conservation = float(np.max(np.abs(self.cell_p @ plane.mass_weight - 1.0)))
         self.mean = self._section(self.cell_p.mean(axis=0), None)
@@ -637,7 +639,7 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
 
     law = restitution if restitution is not None else model.restitution
     left, right = _walls(model, walls)
-    drift = sp.lambdify((X, Y, T), model.substitute(model.ito_drift), "numpy")
+    drift = lambdify_numeric((X, Y, T), model.substitute(model.ito_drift))
 
     def solve_on(h, n1, n2):
         t0 = time.perf_counter()

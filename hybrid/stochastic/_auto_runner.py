@@ -58,7 +58,7 @@ class AutomatonScheme:
         1.0
         """
         additive = st is not None and _additive(st)
-        if self.name in ("em", "splitting"):  # neither has the Milstein correction
+        if self.name in ("em", "splitting", "naive"):  # none has the Milstein correction
             return {"strong": 1.0 if additive else 0.5, "weak": 1.0}
         if self.name == "baoab":  # noise free of the velocities on velocities only: no Milstein term exists
             return {"strong": 1.0, "weak": 2.0}
@@ -71,7 +71,7 @@ class AutomatonScheme:
                 "the noise is not commutative (L^j G_k != L^k G_j): Milstein would need Levy areas; use "
                 "scheme='em' (strong order 0.5) or, for a mechanical system with noise on the velocities, 'splitting'"
             )
-        if self.name in ("splitting", "symplectic", "baoab"):
+        if self.name in ("splitting", "symplectic", "baoab", "naive"):
             paired = {i for pair in st.pairs for i in pair}
             missing = [s for i, s in enumerate(st.states) if i not in paired]
             if missing:
@@ -419,9 +419,23 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     out = np.empty((dws.shape[0], n))
     elog = np.full((dws.shape[0], n_log, 3), np.nan)
     nlog = np.zeros(dws.shape[0], dtype=np.int64)
+    bad = np.zeros(3)
     module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
-                 out, elog, nlog)
+                 out, elog, nlog, bad)
+    _warn_driven(bad)
     return (out, elog, nlog) if n_log else out
+
+
+def _warn_driven(bad) -> None:
+    """Say what ``drive`` counted: firings whose check failed, steps over the cap of events."""
+    from hybrid.errors import VibroWarning
+
+    if bad[0]:
+        warnings.warn(f"{int(bad[0])} firings failed their transition's check (first at speed {bad[1]:.4g}): the "
+                      "reset is outside what the model declares valid there", VibroWarning, stacklevel=3)
+    if bad[2]:
+        warnings.warn(f"{int(bad[2])} steps hit the cap of {_auto_codegen.MAX_EVENTS} events (chattering or a Zeno "
+                      "accumulation inside one step); reduce dt", ChatteringWarning, stacklevel=3)
 
 
 def _as_float(name, value, positive=True):
@@ -463,7 +477,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     automaton : HybridAutomaton
         States, modes (flow, noise: one column per independent white noise), transitions (guard, direction,
         symbolic reset, priority, target).
-    scheme : {'em', 'milstein', 'splitting', 'symplectic', 'baoab'}
+    scheme : {'em', 'milstein', 'splitting', 'symplectic', 'baoab', 'naive'}
         Euler-Maruyama; Milstein (commutative noise); the mechanical splitting (kick, free flight of the
         positions with exact crossing location, noise, kick); the symplectic Milstein (the velocities' Milstein
         step, then the free flight of the positions at the new velocities, crossings located exactly: the
@@ -472,7 +486,9 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         noise free of the velocities). The last three need every state to be a position (d q/dt = v, no noise)
         or a velocity; they do not pump energy into lightly damped oscillators as the explicit em and milstein
         do (about dt omega**2 / c). A guard that depends on a velocity (an energy level) is also located in the
-        sub-steps that move only the velocities (kicks, noise, O step), at their instant.
+        sub-steps that move only the velocities (kicks, noise, O step), at their instant. ``naive`` (for charts
+        only) is symplectic Euler-Maruyama whose crossing resets the state where the flight meets the guard and drops
+        the rest of the step (the event time is wrong by up to a step); it also needs positions and velocities.
     dt, paths, t_end, t_burn : float, int, float, float
         Step, number of paths, end time, burn-in before statistics (time starts at 0).
     x0 : sequence of float

@@ -8,7 +8,7 @@ import argparse
 from hybrid.errors import ParameterError
 from hybrid.io import atomic_write_text
 
-from .common import phases_path
+from .common import csv_text, phases_path
 
 
 def register(subparsers) -> None:
@@ -95,15 +95,6 @@ _BYTES_PER_PHASE_ROW = 300  # a row of the --phases table (pandas, with its stri
 _BYTES_PER_CELL = 8 * 8 + 60  # meshgrid, energies, density, and one CSV line
 
 
-def _csv(columns: dict) -> str:
-    import numpy as np
-
-    names = list(columns)
-    data = np.column_stack([np.asarray(columns[k], dtype=float).ravel() for k in names])
-    lines = [",".join(names)] + [",".join(f"{v:.17g}" for v in row) for row in data]
-    return "\n".join(lines) + "\n"
-
-
 def _check_resolved(args, sd, joint=None) -> None:
     """Warn unless the p(H) (or, with ``joint`` = (x, y, p), the p(x, y)) about to be written is resolved by its
     grid and integrates to 1 there (hybrid.resolution, the one check of every density writer)."""
@@ -186,10 +177,10 @@ def _run_forced(args, model, plan) -> int:
                                                          hi if math.isfinite(hi) else span, args.xy_bins[0]),
                 "y": (-y_hi, y_hi, args.xy_bins[1])}
         phase_table = sol.phase_to_pandas(args.phases, bins)
-    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    atomic_write_text(args.out, csv_text({"H": sd.H, "p": sd.p}))
     written = [args.out]
     if args.joint is not None:
-        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+        atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
         written.append(args.joint)
     if phase_table is not None:
         atomic_write_text(phases_path(args), phase_table.to_csv(index=False, float_format="%.17g"))
@@ -332,9 +323,9 @@ def run(args: argparse.Namespace) -> int:
         pxy = sd.joint(x, y)
         _check_resolved(args, sd, (x, y, pxy))
         X, Y = np.meshgrid(x, y)
-    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    atomic_write_text(args.out, csv_text({"H": sd.H, "p": sd.p}))
     if args.joint is not None:
-        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+        atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
     from averaging.quadrature import geometry
 
     Gd = geometry(model).G_delta  # the lowest impact level (inf without walls)
