@@ -183,7 +183,7 @@ by itself; the command line turns the record into one line on stderr, so a first
 
 COMPILE_ESTIMATE_S = {"vibro_mc": 10, "vibro_auto": 20}
 """About how long a cold compile takes, by kernel family (measured on 2 busy cores: oscillator ~7-10 s, automaton
-~15-20 s); only said to the user. The CUDA kernels (``vibro_auto_cuda``) are not measured here: no estimate is said."""
+~15-20 s); only said to the user. Compiles of the CUDA kernels have not been measured."""
 
 
 def _label(name: str) -> str:

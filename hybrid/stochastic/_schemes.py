@@ -130,7 +130,6 @@ class Splitting(Scheme):
         self._parts(model)
 
 
-
 class NaiveFlip(Scheme):
     """The naive scheme, for charts only: symplectic Euler-Maruyama, then if x left the gap put it on the wall and
     flip y with the law. The impact time is wrong by up to one step (the anti-pattern of design.md).
