@@ -8,7 +8,8 @@ process (tests/test_auto_cuda.py starts it once: importing numba-cuda's simulato
 writes, for every model of :func:`models` and every run of :data:`VARIANTS`, OUTDIR/<run>.pkl (the
 AutomatonEnsemble) and OUTDIR/<run>_ckpt/ (the final checkpoint: every path's state); for every model also
 OUTDIR/cpu_<name>.pkl (the CPU kernel's ensemble of 4x the paths, threads scheduler, its own xoshiro streams) and
-OUTDIR/drive_<name>.npz (the CPU kernel's ``drive`` fed the Philox normals of the first paths); and the outputs of
+OUTDIR/drive_<name>.npz (the CPU kernel's ``drive`` fed the Philox normals of the first paths);
+OUTDIR/oscillator_example1.npz (Example 1 through ``simulate_ensemble(..., scheduler="cuda")``); and the outputs of
 two ``vibro mc --scheduler cuda`` runs under OUTDIR/cli_*. With ``NUMBA_DISABLE_JIT=1`` the CPU kernel runs as
 Python instead of being compiled (seconds instead of ~25 s per model): the same source, and bitwise the same numbers
 (numba contracts no floating-point operation without fastmath). Sizes are tiny: the simulator runs every thread as
@@ -32,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 
 from hybrid.automaton import HybridAutomaton, Mode, Transition, real_symbol  # noqa: E402
 from hybrid.errors import VibroError  # noqa: E402
-from hybrid.stochastic import _auto_cuda, _cuda_rng, drive_automaton, simulate_automaton  # noqa: E402
+from hybrid.stochastic import _auto_cuda, _cuda_rng, drive_automaton, simulate_automaton, simulate_ensemble  # noqa: E402
 from hybrid.stochastic._auto_codegen import analyse  # noqa: E402
 from models import DuffingImpact, ForcedDuffingImpact, ImpactOscillator, Newton  # noqa: E402
 from models.automata import impact_pair, vibrating_table  # noqa: E402
@@ -152,6 +153,15 @@ def cpu_references(out: Path, name: str, automaton, scheme: str, kw: dict) -> No
     np.savez(out / f"drive_{name}.npz", end=end, log=log, nlog=nlog)
 
 
+def oscillator_route(out: Path) -> None:
+    """``simulate_ensemble(DuffingImpact(), "milstein", scheduler="cuda")`` with the "example1" run's step, times,
+    seed and H bins: the oscillator's GPU route (its automaton, the law's numbers lifted into parameters)."""
+    _, _, kw = models()["example1"]
+    args = {k: v for k, v in kw.items() if k not in ("x0", "histograms")}
+    stats = simulate_ensemble(DuffingImpact(), "milstein", h_max=4.0, bins=40, xy_bins=None, **args)
+    np.savez(out / "oscillator_example1.npz", **stats.to_arrays())
+
+
 def cli_runs(out: Path) -> None:
     """``vibro mc --scheduler cuda`` on an automaton model and on a forced model with phase sections."""
     from vibro.cli import main as cli
@@ -178,6 +188,7 @@ def main(out: Path) -> None:
             pickle.dump(ens, f)
         print(f"{run}: {ens.settings['seconds']:.1f} s", flush=True)
     interrupted_then_resumed(out, "impact_pair")
+    oscillator_route(out)
     for name, (automaton, scheme, kw) in table.items():
         t0 = time.perf_counter()
         cpu_references(out, name, automaton, scheme, kw)

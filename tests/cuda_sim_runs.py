@@ -1,10 +1,13 @@
-"""CUDA-scheduler runs on numba's CUDA simulator, in a process of their own (tests/test_cuda.py starts it).
+"""``simulate_ensemble(..., scheduler="cuda")`` runs of Example 1 on numba's CUDA simulator, in a process of their own
+(tests/test_cuda.py starts it once). The oscillator's CUDA route is the automaton's CUDA target
+(hybrid/stochastic/_auto_cuda.py) running ``model.to_automaton()``.
 
 ``NUMBA_ENABLE_CUDASIM=1`` must be set before numba is imported, hence the separate process. Usage::
 
     NUMBA_ENABLE_CUDASIM=1 python tests/cuda_sim_runs.py OUTDIR
 
-writes OUTDIR/<run>.npz (statistics arrays) and OUTDIR/<run>_ckpt/ (checkpoints) for the runs in ``RUNS``.
+writes OUTDIR/<run>.npz (statistics arrays) and OUTDIR/tpb32_ckpt/ (its final checkpoint: every path's state) for
+the runs in ``RUNS``, and OUTDIR/resumed.npz.
 Sizes are tiny: the simulator executes every thread as Python (about 1e4 path-steps/s).
 """
 
@@ -20,7 +23,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hybrid.stochastic import _cuda, simulate_ensemble  # noqa: E402
+from hybrid.stochastic import _auto_cuda, simulate_ensemble  # noqa: E402
+from hybrid.stochastic._auto_exec import CHECKPOINT_FILE  # noqa: E402
 from models import DuffingImpact  # noqa: E402
 
 # Example 1 (Fig. 2, delta = 1, Ma V_C = 0.4); coarse step on purpose (the CPU comparison uses the same step)
@@ -45,35 +49,23 @@ def interrupted_then_resumed(out: Path) -> None:
     """Interrupt the run of launches of 50 steps (checkpoint after each) at the end of its second launch, before
     that launch's checkpoint is written; the checkpoint then holds 50 steps, and resume recomputes from there."""
     ck = out / "resume_ckpt"
-    real = _cuda.run_ensemble
+    real = _auto_cuda._after_launch
     args = dict(BASE, scheme="splitting", threads_per_block=32, launch_steps=50, checkpoint=ck, checkpoint_every=1)
 
-    def stopping(*a, **kw):
-        sync = _cuda.require_cuda().synchronize
-        calls = {"n": 0}
+    def stopping(n_done):
+        if n_done == 100:
+            raise Interrupt
 
-        def counting():
-            sync()
-            calls["n"] += 1
-            if calls["n"] == 3:  # the compile launch, the first launch of steps, the second
-                raise Interrupt
-
-        _cuda.require_cuda().synchronize = counting
-        try:
-            return real(*a, **kw)
-        finally:
-            _cuda.require_cuda().synchronize = sync
-
-    _cuda.run_ensemble = stopping
+    _auto_cuda._after_launch = stopping
     try:
         simulate_ensemble(DuffingImpact(), **args)
         raise SystemExit("the interruption did not happen")
     except Interrupt:
         pass
     finally:
-        _cuda.run_ensemble = real
-    with np.load(ck / _cuda.CUDA_CHECKPOINT_FILE) as d:
-        partial = int(d["n_done"])
+        _auto_cuda._after_launch = real
+    with np.load(ck / CHECKPOINT_FILE) as d:
+        partial = int(d["n_done"][0])
     stats = simulate_ensemble(DuffingImpact(), **args, resume=True)
     np.savez(out / "resumed.npz", partial=partial, **stats.to_arrays())
 

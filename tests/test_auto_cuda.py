@@ -225,6 +225,23 @@ def test_rows_beyond_the_device_memory_are_refused_with_the_estimate(sim):
 
 
 @needs_sim
+def test_oscillator_route_gives_the_automaton_routes_numbers(sim):
+    """Two entry points, one answer: ``simulate_ensemble(DuffingImpact(), "milstein", scheduler="cuda")`` runs
+    Example 1's automaton on this target, so with the same seed, step and bins it has the "example1" run's H
+    histogram, samples and impacts bit for bit, and its energy sum to rounding (other chunk groupings)."""
+    from hybrid.stochastic import EnsembleStatistics
+
+    with np.load(sim / "oscillator_example1.npz") as d:
+        osc = EnsembleStatistics.from_arrays(dict(d))
+    ens = _load(sim, "example1")
+    assert osc.settings["kernel"] == "cuda" and osc.settings["rng"] == ens.settings["rng"]
+    np.testing.assert_array_equal(osc.h_counts, ens.counts["H"][1:-1])
+    assert osc.total("h_under") == ens.counts["H"][0] and osc.total("h_over") == ens.counts["H"][-1]
+    assert osc.total("samples") == ens.chunk_samples.sum() and osc.impacts == ens.events.sum() > 0
+    assert osc.chunk_sums[:, 0].sum() == pytest.approx(ens.chunk_sums[:, 0].sum(), rel=1e-12)
+
+
+@needs_sim
 def test_vibro_mc_runs_automata_and_forced_models_on_cuda(sim):
     assert (sim / "cli_rc.txt").read_text() == "0 0"
     for stem in ("cli_pair", "cli_forced"):

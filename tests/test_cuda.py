@@ -1,6 +1,10 @@
-"""The ``cuda`` scheduler on numba's CUDA simulator (CI has no GPU): the same statistics as the CPU kernel, the same
-trajectories for the same normals, bitwise the same numbers for two launch configurations and across a resume, the
-barrier invariant, the counter-based generator, and the one-line error when CUDA is unavailable.
+"""``simulate_ensemble(..., scheduler="cuda")`` for oscillators, on numba's CUDA simulator (CI has no GPU).
+
+The oscillator's GPU route is the automaton's CUDA target (hybrid/stochastic/_auto_cuda.py) on
+``model.to_automaton()``, the job the CPU route runs, with its rows returned as :class:`EnsembleStatistics`. Checked:
+the same statistics as the CPU route within the intervals, the same trajectories for the same normals, bitwise the
+same numbers for two launch configurations and across a resume, the barrier invariant, f32 close to f64, the
+counter-based generator, and the one-line error when CUDA is unavailable.
 
 The simulator runs each thread as Python, so the runs are tiny (64 paths x 400 steps) and happen once, in a
 subprocess started with ``NUMBA_ENABLE_CUDASIM=1`` (tests/cuda_sim_runs.py). What the simulator cannot show
@@ -9,7 +13,6 @@ subprocess started with ``NUMBA_ENABLE_CUDASIM=1`` (tests/cuda_sim_runs.py). Wha
 
 from __future__ import annotations
 
-import ast
 import importlib.util
 import math
 import os
@@ -21,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hybrid.errors import CudaUnavailableError, ModelError, ParameterError
-from hybrid.stochastic import SCHEMES, EnsembleStatistics, _cuda, _cuda_rng, drive_paths, simulate_ensemble
-from hybrid.stochastic._statistics import COUNTS, SUMS
+from hybrid.errors import CudaUnavailableError, ParameterError
+from hybrid.stochastic import EnsembleStatistics, _auto_cuda, _cuda_rng, drive_paths, simulate_ensemble
+from hybrid.stochastic._auto_exec import CHECKPOINT_FILE
 from models import DuffingImpact
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,7 +84,8 @@ def test_cuda_statistics_agree_with_the_cpu_kernel_within_the_intervals(sim, sch
     """Same model, step, times and histograms; independent streams: the difference of two estimates must lie within
     the 95 % interval of the difference, sqrt(ci_gpu**2 + ci_cpu**2). The CPU side has 32x the paths."""
     gpu, cpu = sim[run], _cpu(scheme, 2048)
-    assert gpu.paths == 64 and gpu.settings["rng"] == _cuda.RNG and gpu.settings["precision"] == "f64"
+    assert gpu.paths == 64 and gpu.settings["rng"] == _auto_cuda.RNG and gpu.settings["precision"] == "f64"
+    assert gpu.settings["kernel"] == "cuda" and gpu.settings["cuda_kernel"].startswith("vibro_auto_cuda_")
     assert gpu.total("samples") * 32 == cpu.total("samples")  # the same samples per path
     for name in MOMENTS:
         g, c = getattr(gpu, name), getattr(cpu, name)
@@ -92,11 +96,11 @@ def test_cuda_statistics_agree_with_the_cpu_kernel_within_the_intervals(sim, sch
 @pytest.mark.slow  # the simulator's thread scheduling: 20 s to over 10 min on 2 cores
 @needs_sim
 def test_cuda_kernel_follows_the_cpu_trajectories_for_the_same_normals(sim):
-    """The kernel is generated from the CPU kernel's step code: fed the Philox normals of paths 0..7, the CPU kernel
-    (drive_paths) ends where the simulated GPU threads ended (final x, y from the checkpoint)."""
+    """The device module is the automaton generator's step code: fed the Philox normals of paths 0..7, the CPU
+    kernel (drive_paths) ends where the simulated GPU threads ended (final x, y from the checkpoint)."""
     s = cuda_sim_runs.BASE
-    with np.load(sim["out"] / "tpb32_ckpt" / _cuda.CUDA_CHECKPOINT_FILE) as d:
-        xs, ys, n_done = d["xs"], d["ys"], int(d["n_done"])
+    with np.load(sim["out"] / "tpb32_ckpt" / CHECKPOINT_FILE) as d:
+        xs, ys, n_done = d["XS"][:, 0], d["XS"][:, 1], int(d["n_done"][0])
     assert n_done == round(s["t_end"] / s["dt"])
     k0, k1 = _cuda_rng.seed_key(s["seed"])
     z = np.array([[v for j in range(n_done // 2) for v in _cuda_rng.normal_pair_f64(k0, k1, p, j)]
@@ -140,8 +144,8 @@ def test_cuda_barrier_invariant(sim):
         assert st.total("v_over") == 0 and st.v_counts.sum() == st.impacts, name
         assert st.xy_counts[:, :2].sum() == 0 and st.xy_counts[:, -2:].sum() == 0, name
         assert st.total("xy_out") == 0
-    with np.load(sim["out"] / "tpb32_ckpt" / _cuda.CUDA_CHECKPOINT_FILE) as d:
-        assert np.all(np.abs(d["xs"]) <= 1.0)
+    with np.load(sim["out"] / "tpb32_ckpt" / CHECKPOINT_FILE) as d:
+        assert np.all(np.abs(d["XS"][:, 0]) <= 1.0)
 
 
 @pytest.mark.slow  # the simulator's thread scheduling: 20 s to over 10 min on 2 cores
@@ -176,39 +180,16 @@ def test_philox_known_answers_and_normals():
     assert stats.kstest(z32, "norm").pvalue > 1e-3 and np.abs(z32).max() < 6.7
 
 
-# ---------------------------------------------------------------------------------------------------- generation
-@pytest.mark.parametrize("scheme", sorted(SCHEMES))
-@pytest.mark.parametrize("precision", ["f64", "f32"])
-def test_cuda_source_comes_from_the_cpu_step_code(scheme, precision):
-    src, law, lanes = _cuda.generate_cuda_source(DuffingImpact(), SCHEMES[scheme], 40, 20, 1, precision)
-    tree = ast.parse(src)
-    assert "[k," not in src and "cuda.atomic.add(sh_v" in src and "def advance" in src and law == (0.4, law[1])
-    assert lanes == SCHEMES[scheme].lane_vars
-    if precision == "f32":  # every float literal is typed float32, except the float64 accumulators' _dty(...)
-        calls = {id(a) for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
-                 and n.func.id in ("_fty", "_dty") for a in n.args}
-        bare = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, float)
-                and id(n) not in calls]
-        assert bare == []
-
-
-def test_cuda_translation_refuses_unknown_per_chunk_statements():
-    assert _cuda._to_shared_atomics("    vh[k, int(_vb)] += 1").splitlines() == [
-        "    _bi = int(_vb)", "    if _bi >= 0 and _bi < VB:", "        cuda.atomic.add(sh_v, _bi, 1)", "    else:",
-        "        v_over += 1"]
-    with pytest.raises(ModelError, match="shared histogram"):
-        _cuda._to_shared_atomics("    other[k, 3] += 1")
-    with pytest.raises(ModelError, match="per-chunk"):
-        _cuda._to_shared_atomics("    cnt[k, 3] = 1")
-    assert set(_cuda.COUNT_VARS) == set(COUNTS) and set(_cuda.SUM_VARS) == set(SUMS)
-
-
+# ---------------------------------------------------------------------------------------------------- options
 def test_cuda_refuses_bad_options_before_any_work():
     m = DuffingImpact()
     with pytest.raises(ParameterError, match="needs scheduler='cuda'"):
         simulate_ensemble(m, "splitting", dt=0.01, paths=2, t_end=1.0, t_burn=0.5, precision="f32")
     with pytest.raises(ParameterError, match="unknown scheduler"):
         simulate_ensemble(m, "splitting", dt=0.01, paths=2, t_end=1.0, t_burn=0.5, scheduler="gpu")
+    with pytest.raises(ParameterError, match="CPU kernel"):
+        simulate_ensemble(m, "splitting", dt=0.01, paths=2, t_end=1.0, t_burn=0.5, scheduler="cuda",
+                          kernel="automaton")
 
 
 # ---------------------------------------------------------------------------------------------------- no CUDA
@@ -284,18 +265,18 @@ except Exception as exc:
     print("SKIP", type(exc).__name__, str(exc).splitlines()[0][:200] if str(exc) else "")
     sys.exit(0)
 from models import DuffingImpact
-from hybrid.stochastic import SCHEMES, _cuda
+from hybrid.stochastic import _auto_cuda, _front
+automaton, observables, _, _ = _front._generated(DuffingImpact(), "baoab")  # what scheduler='cuda' runs
 for prec in ("f64", "f32"):
-    ptx = _cuda.compile_ptx(DuffingImpact(), SCHEMES["splitting"], prec, 400, 200, 6400)
+    ptx = _auto_cuda.compile_ptx(automaton, "baoab", observables, histograms_width=402, v_bins=200, precision=prec)
     print(prec, " ".join(sorted(set(re.findall(r"^\\s+([a-z][\\w.]*)", ptx, re.M)))))
 """
 
 
-def test_cuda_kernel_compiles_to_ptx_for_the_h100():
-    """The real numba-cuda pipeline (typing, lowering, NVVM) on the generated kernel, for sm_90, without a GPU.
-
-    The simulator runs the kernel as Python and checks no types; this does. It needs NVVM and NVRTC (the
-    ``nvidia-nvvm`` and ``nvidia-cuda-nvrtc`` wheels or a CUDA toolkit), which CI does not install: skipped there.
+def test_cuda_kernel_of_example_1_compiles_to_ptx_for_the_h100():
+    """The real numba-cuda pipeline (typing, lowering, NVVM) on the kernel ``scheduler='cuda'`` runs for Example 1
+    (its automaton, splitting), for sm_90, without a GPU. It needs NVVM and NVRTC (the ``nvidia-nvvm`` and
+    ``nvidia-cuda-nvrtc`` wheels or a CUDA toolkit), which CI does not install: skipped there.
     """
     e = _env()
     e.pop("NUMBA_ENABLE_CUDASIM", None)
@@ -306,9 +287,4 @@ def test_cuda_kernel_compiles_to_ptx_for_the_h100():
         pytest.skip(f"cannot compile PTX here: {out['SKIP']}")
     f64, f32 = set(out["f64"].split()), set(out["f32"].split())
     assert {"atom.shared.add.u32", "atom.global.add.u64", "bar.sync"} <= f64 and "fma.rn.f64" in f64
-    # single precision: no double arithmetic in the step (float64 only in the moment sums, add.f64 or sub.f64 when
-    # the sum adds -y, and their conversions; mul.f64 is libdevice's huge-argument branch of sinf/cosf, never taken
-    # for Box-Muller's angle in [0, 2 pi))
-    f64_ops = {op for op in f32 if op.endswith(".f64") and not op.startswith(("cvt", "ld.", "st."))}
-    assert f64_ops <= {"add.f64", "sub.f64", "mul.f64"}
     assert "fma.rn.f32" in f32

@@ -27,9 +27,9 @@ How it works:
 * ``_runner``: chunks of paths run on ``numba.get_num_threads()`` threads (a ``nogil`` kernel; each call interleaves
   8 paths so that their dependency chains overlap) or on Dask; checkpoints and resume. :func:`sample_paths` stores
   the very paths of the ensemble with the same seed; :func:`drive_paths` feeds given normals.
-* ``_cuda`` / ``_cuda_rng``: ``scheduler="cuda"``, the oscillator schemes' step code (``_schemes``, printed by
-  ``_codegen.Emitter``) in a numba-cuda kernel (one thread per path, Philox-4x32-10 normals, block-shared
-  histograms, launches with checkpoints); docs/gpu.md.
+* ``_auto_cuda`` / ``_cuda_rng``: ``scheduler="cuda"`` for automata and oscillators alike (an oscillator runs its
+  automaton: ``_front.run_on_cuda``), the automaton generator's step code as numba-cuda device functions (one
+  thread per path, Philox-4x32-10 normals, block-shared histograms, launches with checkpoints); docs/gpu.md.
 
 Examples
 --------

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import time
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
@@ -180,6 +182,12 @@ class AutomatonChunks:
         """Run chunks ``ids`` (with their RNG ``states``); the per-chunk arrays of :class:`EnsembleStatistics`."""
         if module is None:
             module = self.job.module()
+        outs = [self.job.run(int(k), np.array(states[i], dtype=np.uint64), module=module) for i, k in enumerate(ids)]
+        return self.rows(ids, outs)
+
+    def rows(self, ids, outs):
+        """The automaton kernel's per-chunk outputs ``outs`` (dicts of its arrays) of chunks ``ids`` as the
+        per-chunk arrays of :class:`EnsembleStatistics`: ``(ids, paths, hist, xy, v, counts, sums)``."""
         n, bins, vb = len(ids), self.bins, self.v_bins
         nx, ny = self.xy_bins if self.xy_bins is not None else (1, 1)
         hist = np.zeros((n, bins), np.int64)
@@ -188,8 +196,7 @@ class AutomatonChunks:
         cnt = np.zeros((n, len(COUNTS)), np.int64)
         sm = np.zeros((n, len(SUMS)))
         c, s = COUNTS.index, SUMS.index
-        for i, k in enumerate(ids):
-            out = self.job.run(int(k), np.array(states[i], dtype=np.uint64), module=module)
+        for i, out in enumerate(outs):
             h, counts, sums, events = out["hist"][0], out["counts"], out["sums"], out["events"]
             hist[i] = h[1: bins + 1]
             if self.xy_bins is not None:
@@ -219,6 +226,15 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     both kernels bin alike. Returns ``(AutomatonKernel, AutomatonChunks)``.
     """
     t0 = time.perf_counter()
+    chunks, identity = _job(model, settings, h_scale, v_scale, xy_scales, scheme)
+    module = chunks.job.module()
+    chunks.job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
+    return AutomatonKernel(module, identity, time.perf_counter() - t0), chunks
+
+
+def _job(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple, scheme: str) -> tuple:
+    """The automaton job of the run ``settings`` (nothing compiled) as :class:`AutomatonChunks`, and the kernel's
+    identity (its source and the restitution law's numbers, for checkpoints)."""
     auto_scheme = AUTOMATON_SCHEME_OF[scheme]
     automaton, observables, src, st = _generated(model, auto_scheme)
     name, user_law = kernel_name(model, auto_scheme, src)
@@ -247,16 +263,59 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     )
     job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes, label=f"{model.name}/{auto_scheme}",
                                   user_law=user_law)
-    module = job.module()
-    job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
     # the law's numbers in full precision (they are parameters of the kernel, not in its source); a callable's code
     fn = getattr(model.restitution, "callable", None)
     law = ([float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")] if fn is None
            else [_codegen.callable_digest(fn)])
     key = hashlib.sha256((src + _codegen.dependency_hash(src)).encode()).hexdigest()[:32]
     identity = {"kernel": key, "law": [model.restitution.spec(), *law]}
-    kern = AutomatonKernel(module, identity, time.perf_counter() - t0)
-    return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
+    return AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions)), identity
+
+
+def run_on_cuda(model, scheme: str, settings: dict, scales: dict, *, precision: str = "f64",
+                threads_per_block: int = 128, launch_steps=None, checkpoint=None, resume: bool = False,
+                checkpoint_every: int = 4):
+    """The oscillator ensemble of ``settings`` on the GPU: the automaton's CUDA target
+    (:class:`~hybrid.stochastic._auto_cuda.CudaRun`, the same generated step code with counter-based normals)
+    runs the job the CPU route runs, and its per-chunk rows become the rows of :class:`EnsembleStatistics`.
+
+    Checkpoints are the automaton engine's (checksummed, tied to the run's settings, the kernel, the precision and
+    the device source); the numbers do not depend on ``threads_per_block`` or ``launch_steps``. Returns the
+    statistics before the runner's result checks.
+    """
+    from . import _auto_cuda
+    from ._runner import _RESUME_KEYS, CHECKPOINT_FILE
+    from ._statistics import EnsembleStatistics
+
+    t0 = time.perf_counter()
+    chunks, identity = _job(model, settings, scales["h_scale"], scales["v_scale"],
+                            (scales["x_scale"], scales["y_scale"]), scheme)
+    auto_scheme = AUTOMATON_SCHEME_OF[scheme]
+    automaton, observables, _, st = _generated(model, auto_scheme)
+    device = _auto_cuda.CudaRun(chunks.job, automaton, auto_scheme, observables, "stratonovich", summed=_SUMMED,
+                                phases=0, n_trans=len(st.transitions), seed=settings["seed"], precision=precision,
+                                threads_per_block=threads_per_block)
+    compile_time = time.perf_counter() - t0  # generation and load; numba-cuda compiles at the first launch
+    settings["identity"] = {**identity, "params": {k: float.hex(float(model.params[k])) for k in tuple(model.params)}}
+    ckdir = Path(checkpoint) if checkpoint is not None else None
+    if ckdir is not None:
+        if resume and (ckdir / CHECKPOINT_FILE).exists():
+            raise ParameterError(f"{ckdir} holds a checkpoint of the CPU scheduler, whose random streams differ; "
+                                 "resume it without --scheduler cuda, or use another --checkpoint directory")
+        _auto_exec.check_directory(ckdir, resume)
+    keyed = json.loads(json.dumps({k: settings.get(k) for k in _RESUME_KEYS}, default=str))
+    run_id = _auto_exec.identity({**keyed, "precision": precision, "device_source": device.name})
+    rows = {k: np.zeros((settings["n_chunks"], *shape), dtype=dtype)
+            for k, (shape, dtype, _) in chunks.job.shapes.items()}
+    device_settings = device.run(rows, run_id=run_id, checkpoint=ckdir, resume=resume,
+                                 checkpoint_every=checkpoint_every, launch_steps=launch_steps)
+    ids = np.arange(settings["n_chunks"], dtype=np.int64)
+    settings.update(device_settings)
+    stats = EnsembleStatistics.empty(settings)
+    stats.add_chunks(*chunks.rows(ids, [{k: v[i] for k, v in rows.items()} for i in ids]))
+    stats.wall_time = device_settings["device_seconds"]
+    stats.compile_time = compile_time
+    return stats
 
 
 _USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused

@@ -510,7 +510,8 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         Continue from the checkpoint: finished chunks are not recomputed, none is counted twice.
     scheduler : None, "threads", "dask", "dask=ADDRESS", "cuda" or a ``distributed.Client``
         Where chunks run: numba threads in this process (default), Dask (a LocalCluster for "dask"), or an NVIDIA
-        GPU with numba-cuda (one thread per path, see :mod:`hybrid.stochastic._cuda`; ``pip install -e ".[cuda]"``).
+        GPU with numba-cuda (one thread per path: the automaton's CUDA target, :mod:`hybrid.stochastic._auto_cuda`,
+        runs ``model.to_automaton()``'s generated step code with counter-based normals; ``pip install -e ".[cuda]"``).
     precision : {"f64", "f32"}
         Floating point of the ``cuda`` kernel (the CPU kernels are double only).
     threads_per_block, launch_steps : int
@@ -597,13 +598,11 @@ def solve_ensemble(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm | No
     model = problem.model
     sch, settings = _prepare(problem, algorithm, execution)
     ex = execution
-    if ex.scheduler == "cuda":  # launches, checkpoints and resume of its own (_cuda.py); the result checks are shared
-        from . import _cuda
-
-        stats = _cuda.run_ensemble(model, sch, settings, checkpoint=ex.checkpoint, resume=ex.resume,
-                                   checkpoint_every=int(ex.checkpoint_every), progress=ex.progress,
-                                   precision=algorithm.precision, threads_per_block=ex.threads_per_block,
-                                   launch_steps=ex.launch_steps)
+    if ex.scheduler == "cuda":  # the automaton's CUDA target runs the same job; the result checks are shared
+        stats = _front.run_on_cuda(model, sch.name, settings, _scales(settings), precision=algorithm.precision,
+                                   threads_per_block=ex.threads_per_block, launch_steps=ex.launch_steps,
+                                   checkpoint=ex.checkpoint, resume=ex.resume,
+                                   checkpoint_every=int(ex.checkpoint_every))
     else:
         stats = _run_on_cpu(model, sch, settings, ex)
     return _check_result(model, stats, settings, algorithm.dt)
@@ -645,13 +644,11 @@ def _choose_kernel(model, sch, kernel, gpu: bool) -> str:
         hint = (" (the oscillator's own CPU kernel is gone: every CPU ensemble runs on the kernel generated from "
                 "model.to_automaton())" if kernel == "oscillator" else "")
         raise ParameterError(f"kernel={kernel!r}; use one of {list(_front.KERNELS)}{hint}")
-    if gpu:
-        if kernel == "automaton":
-            raise ParameterError("kernel='automaton' is a CPU kernel; scheduler='cuda' runs its own GPU kernel: "
-                                 "drop one of them")
-        return "cuda"
+    if gpu and kernel == "automaton":
+        raise ParameterError("kernel='automaton' is a CPU kernel; scheduler='cuda' runs its own GPU kernel: "
+                             "drop one of them")
     _front.check_model(model, sch)  # before anything is compiled
-    return "automaton"
+    return "cuda" if gpu else "automaton"
 
 
 def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics:

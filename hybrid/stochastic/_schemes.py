@@ -1,12 +1,12 @@
-"""Time-stepping schemes for the Monte Carlo kernels: a registry of small classes that emit numba code.
+"""Time-stepping schemes of oscillator ensembles: a registry of small classes that declare their orders.
 
 Every scheme advances (x, y) over one step dt with one standard normal ``xi`` and handles the barriers inside the
 step. It declares its orders for smooth problems (no barriers): ``strong_order`` and ``weak_order``, and
 ``weak_order_barriers``, the weak order it keeps with impacts. The tests fit these orders from convergence slopes.
 
-To add a scheme: subclass :class:`Scheme`, implement :meth:`Scheme.step_code` (Python source that updates the local
-variables ``x`` and ``y`` from ``xi``, ``dt``, ``sdt`` = sqrt(dt), ``hdt`` = dt/2, using the :class:`Emitter`
-helpers for model expressions and for the free flight with impacts), and add it to :data:`SCHEMES`.
+Every ensemble runs on the kernel generated from ``model.to_automaton()`` (:mod:`._auto_codegen`), with the
+automaton scheme :data:`~hybrid.stochastic._front.AUTOMATON_SCHEME_OF` names for each of these; a scheme here
+declares its orders and refuses (:meth:`Scheme.check`) the models it cannot integrate.
 """
 
 from __future__ import annotations
@@ -33,18 +33,9 @@ class Scheme:
     weak_order = 1.0
     weak_order_barriers = 1.0
     description = ""
-    lane_vars: tuple[str, ...] = ()  # extra per-path variables kept between steps (besides x, y)
 
     def check(self, model) -> None:
         """Raise :class:`ModelError` when the scheme cannot integrate ``model``."""
-
-    def init_code(self, em) -> str:
-        """Code run once per path after x, y are set (for example a force kept between steps)."""
-        return ""
-
-    def step_code(self, em, record: bool) -> str:
-        """Code for one step; ``record`` adds the impact statistics."""
-        raise NotImplementedError
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(strong_order={self.strong_order}, weak_order={self.weak_order}, "
@@ -72,11 +63,6 @@ class EulerMaruyama(Scheme):
     weak_order_barriers = 1.0
     description = "explicit Euler-Maruyama with in-step impact location"
 
-    def step_code(self, em, record):
-        m = em.code(em.model.ito_drift)
-        s = em.code(sp.sqrt(em.model.diffusion_squared))
-        return em.flight_em(f"{m} * dt + {s} * sdt * xi", record)
-
 
 class Milstein(Scheme):
     """Itô Milstein in the velocity, symplectic (semi-implicit) ordering: the new y first, then x with the new y.
@@ -99,18 +85,6 @@ class Milstein(Scheme):
     weak_order = 1.0
     weak_order_barriers = 1.0
     description = "Itô Milstein, symplectic ordering, in-step impact location"
-
-    def step_code(self, em, record):
-        model = em.model
-        m = em.code(model.ito_drift)
-        s = em.code(sp.sqrt(model.diffusion_squared))
-        ds2 = sp.diff(model.diffusion_squared, _Y)
-        lines = []
-        if ds2 == 0:
-            lines.append(f"y = y + {m} * dt + {s} * sdt * xi")
-        else:
-            lines.append(f"y = y + {m} * dt + {s} * sdt * xi + 0.25 * {em.code(ds2)} * dt * (xi * xi - 1.0)")
-        return "\n".join(lines) + "\n" + em.flight("dt", record)
 
 
 class Splitting(Scheme):
@@ -136,7 +110,6 @@ class Splitting(Scheme):
     weak_order = 2.0
     weak_order_barriers = 2.0
     description = "BAOAB splitting: exact free flight with collisions, exact OU step"
-    lane_vars = ("_F",)
 
     def _parts(self, model):
         m = sp.expand(model.ito_drift)
@@ -156,37 +129,6 @@ class Splitting(Scheme):
     def check(self, model):
         self._parts(model)
 
-    def init_code(self, em):
-        F, _ = self._parts(em.model)
-        return f"_F = {em.code(F)}"
-
-    def step_code(self, em, record):
-        F, k = self._parts(em.model)
-        sig2 = em.model.diffusion_squared
-        lines = ["y = y + hdt * _F", em.flight("hdt", record).rstrip()]
-        if em.is_constant(k) and em.is_constant(sig2):
-            kk = em.code(k)
-            em.preamble.append(f"_oa = math.exp(-{kk} * dt)")
-            em.preamble.append(
-                f"_ob = math.sqrt({em.code(sig2)} * dt) if abs({kk} * dt) < 1e-12 "
-                f"else math.sqrt({em.code(sig2)} * -math.expm1(-2.0 * {kk} * dt) / (2.0 * {kk}))"
-            )
-            lines.append("y = _oa * y + _ob * xi")
-        else:
-            kk, s2 = em.code(k), em.code(sig2)
-            lines += [
-                f"_k = {kk}",
-                "_kd = _k * dt",
-                "if abs(_kd) < 1e-12:",
-                f"    y = y * (1.0 - _kd) + math.sqrt({s2} * dt) * xi",
-                "else:",
-                f"    y = math.exp(-_kd) * y + math.sqrt({s2} * -math.expm1(-2.0 * _kd) / (2.0 * _k)) * xi",
-            ]
-        lines.append(em.flight("hdt", record).rstrip())
-        lines.append(f"_F = {em.code(F)}")
-        lines.append("y = y + hdt * _F")
-        return "\n".join(lines)
-
 
 class NaiveFlip(Scheme):
     """The naive scheme, for charts only: symplectic Euler-Maruyama, then if x left the gap put it on the wall and
@@ -203,11 +145,6 @@ class NaiveFlip(Scheme):
     weak_order = 1.0
     weak_order_barriers = 1.0  # measured slope 1.0 for E[x^2], but a bias ~15x that of Milstein at the same dt
     description = "baseline only: velocity flipped at the end of the step, x clamped to the wall"
-
-    def step_code(self, em, record):
-        m = em.code(em.model.ito_drift)
-        s = em.code(sp.sqrt(em.model.diffusion_squared))
-        return f"y = y + {m} * dt + {s} * sdt * xi\n" + em.clamp_flip(record)
 
 
 SCHEMES: dict[str, Scheme] = {

@@ -181,7 +181,6 @@ def plan_outputs(args):
     from pathlib import Path
 
     from hybrid.stochastic._auto_exec import CHECKPOINT_FILE as AUTOMATON_CHECKPOINT
-    from hybrid.stochastic._cuda import CUDA_CHECKPOINT_FILE
     from hybrid.stochastic._runner import CHECKPOINT_FILE
     from vibro.cli.common import output_plan
 
@@ -193,7 +192,7 @@ def plan_outputs(args):
         plan.file(args.summary_json, "--summary-json")
     if args.checkpoint is not None:
         plan.folder(args.checkpoint, "--checkpoint")
-        for name in (CHECKPOINT_FILE, AUTOMATON_CHECKPOINT, CUDA_CHECKPOINT_FILE):  # the files it will hold
+        for name in (CHECKPOINT_FILE, AUTOMATON_CHECKPOINT):  # the files it will hold
             plan.claim(Path(args.checkpoint) / name, "the checkpoint file in --checkpoint")
     return plan
 
