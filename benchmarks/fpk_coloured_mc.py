@@ -46,7 +46,8 @@ def run(name: str) -> dict:
     c0, w0 = time.process_time(), time.perf_counter()
     ens = simulate_automaton(model(), "splitting", dt=dt, paths=PATHS, t_end=t_end, t_burn=T_BURN,
                              x0=(0.0, 0.0, 0.0, 0.0), seed=seed, chunk_paths=4,
-                             observables={"H": "y**2/2 + a*x**2/2 + b*x**4/4", "x": "x", "y": "y", "z": "z", "z2": "z**2"},
+                             observables={"H": "y**2/2 + a*x**2/2 + b*x**4/4", "x": "x", "y": "y", "z": "z",
+                                          "z2": "z**2"},
                              histograms={**RANGES, "z2": None}, joint=JOINT)
     out = {f"{name}_{k}": np.asarray(ens.counts[k]) for k in RANGES}
     out[f"{name}_joint"] = np.asarray(ens.joint[4])
@@ -64,8 +65,8 @@ def main(names) -> None:
     stored = dict(np.load(DATA)) if DATA.exists() else {}
     for name in names:
         stored.update(run(name))
-        stored["model"] = np.array(json.dumps({"base": "DuffingImpact", **PARAMS, "restitution": f"newton:e={RESTITUTION}",
-                                               "filter": "ou", "alpha": ALPHA}))
+        stored["model"] = np.array(json.dumps({"base": "DuffingImpact", **PARAMS, "filter": "ou", "alpha": ALPHA,
+                                               "restitution": f"newton:e={RESTITUTION}"}))
         stored["ranges"] = np.array(json.dumps({**RANGES, "joint": JOINT}))
         DATA.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(DATA, **stored)
