@@ -411,8 +411,6 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
     (0.11, True)
     """
     from .cartesian import CARTESIAN_GRID, stationary_density_cartesian
-    from .solver import _l1_bins
-
     grid = COLOURED_GRID if grid is None else grid
     nx, ny, nz = _grid_triple(grid)
     osc, *_ = _parts(model, params)
@@ -446,7 +444,8 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
                       GridWarning, stacklevel=2)
     coarse_grid = (max(8, nx // 2), max(8, ny // 2), max(6, nz // 2))
     coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd)
-    est = _l1_bins(sd, coarse) / (2.0**order - 1.0) + tail
+    sd._coarse, sd._order, sd._tail = (coarse, None), order, tail  # estimate_error on other bins
+    est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101), order=order)
     sd.error_estimate = est
     sd.error_method = (f"two grids: L1(p on {(nx, ny, nz)}, p on {coarse_grid}) / (2**{order:g} - 1) (Richardson) "
                        f"+ {tail:.2g} (probability in the top 10 % of the box)")
