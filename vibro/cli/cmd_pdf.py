@@ -325,8 +325,8 @@ def run(args: argparse.Namespace) -> int:
         plan.file(args.joint, "--joint", sidecar=True)
     if args.filter:  # coloured noise: only the fpk solver on (x, y, eta)
         if args.method not in ("fpk", "auto"):
-            raise ParameterError(f"--filter {args.filter}: --method {args.method} assumes white noise; use --method fpk "
-                                 "(the density of the filtered model) or vibro mc --filter")
+            raise ParameterError(f"--filter {args.filter}: --method {args.method} assumes white noise; use --method "
+                                 "fpk (the density of the filtered model) or vibro mc --filter")
         if args.phases:
             raise ParameterError("--phases needs a forced model, not --filter")
         args.method = "fpk"
