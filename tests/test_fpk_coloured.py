@@ -99,6 +99,32 @@ def test_interface_and_params():
     assert sd.metadata()["grid"] == [16, 16, 10] and sd.metadata()["model"]["filter"]["kind"] == "ou"
 
 
+@pytest.mark.filterwarnings("ignore::averaging.phase_plane.GridWarning")
+def test_cli_pdf_fpk_filtered(tmp_path, capsys):
+    import json
+
+    import pandas as pd
+
+    from vibro.cli import main
+
+    out = tmp_path / "p.csv"
+    rc = main(["pdf", "--method", "fpk", "--filter", "ou", "--param", "alpha=2", "--param", "c=0.2", "--param",
+               "D=0.1", "--param", "delta=0.6", "--restitution", "newton:e=0.8", "--grid", "16", "16", "--levels",
+               "10", "--points", "400", "--out", str(out), "--joint", str(tmp_path / "j.csv"), "--joint-points", "31"])
+    assert rc == 0
+    assert "OU-filtered noise, alpha = 2" in capsys.readouterr().out
+    table = pd.read_csv(out)
+    assert list(table.columns) == ["H", "p"] and len(table) == 400
+    meta = json.loads((tmp_path / "p.json").read_text())
+    assert meta["settings"]["filter"] == "ou" and meta["settings"]["grid"] == [16, 16, 10]
+    assert meta["results"]["eta_variance"] == pytest.approx(0.2)
+    for argv, text in ((["--method", "jump"], "assumes white noise"), (["--param", "beta=1"], "--param beta")):
+        rc = main(["pdf", "--filter", "ou", *argv, "--out", str(tmp_path / "q.csv")])
+        err = capsys.readouterr().err
+        assert rc == 2 and text in err and len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "q.csv").exists()
+
+
 @pytest.mark.slow
 def test_against_monte_carlo():
     """The default grid against the stored Monte Carlo reference (benchmarks/data/fpk_coloured_mc.npz)."""
