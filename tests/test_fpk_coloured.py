@@ -54,14 +54,14 @@ def test_linear_oscillator_converges_to_the_lyapunov_gaussian():
     edges = np.linspace(0.0, 3.0, 31)
     exact = np.array([integrate.quad(p_H, edges[i], edges[i + 1])[0] for i in range(30)])
     errors, var_x = [], []
-    for grid in ((24, 24, 12), (32, 32, 16)):
+    for grid in ((16, 16, 8), (24, 24, 12)):
         sd = solve_coloured(ou_filter(lin, alpha=alpha), grid=grid, h_max=3.0)
         errors.append(float(np.abs(sd.bin_masses(edges) - exact).sum()))
         var_x.append(sd.mean_x2 / vx - 1.0)
-    order = np.log(errors[0] / errors[1]) / np.log(32 / 24)
-    assert order > 1.5  # second order (measured 1.9)
-    # Richardson at the observed order: the limit of Var x is the closed form
-    ratio = (32 / 24) ** order
+    order = np.log(errors[0] / errors[1]) / np.log(24 / 16)
+    assert order > 1.5  # second order (measured 1.8 here, 1.9 from (24, 24, 12) to (48, 48, 24))
+    # Richardson at the observed order: the limit of Var x is the closed form (Var x is 7.6 % off at (24, 24, 12))
+    ratio = (24 / 16) ** order
     assert abs(var_x[1] + (var_x[1] - var_x[0]) / (ratio - 1.0)) < 5e-3
 
 

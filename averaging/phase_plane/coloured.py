@@ -74,6 +74,8 @@ BYTES_PER_CELL = 3000
 """Peak memory per cell of the assembly, the level factors and GMRES (measured, ``benchmarks/fpk_coloured.py``)."""
 SECONDS_PER_CELL = 1e-4
 """Solve time per cell on 2 shared cores (measured), for the estimate in the refusal."""
+TAIL_PROBE = 1e-4
+"""Probability above the energy that sets the box (twice that energy; see :func:`stationary_density_coloured`)."""
 MAX_ITERATIONS = 400
 """GMRES iterations before the solve is declared not converged."""
 
@@ -384,7 +386,9 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
     h_max : float
         Upper end of the energy range asked for. The (x, y) box is fitted to the mass: to the range that holds all
         but ``FIT_TAIL`` of the white-noise density of the same intensity (the OU filter passes less power at every
-        frequency), within h_max; p(H) is reported on [min G, h_max].
+        frequency), then to twice the energy above which the coarse solve of the check holds ``TAIL_PROBE``
+        (1e-8 left above for an exponential tail; the check warns when the top tenth of the box holds more than
+        1e-4); p(H) is reported on [min G, h_max].
     params : dict, optional
         Parameter overrides (the oscillator's and the filter's ``alpha``).
     walls, points
@@ -418,14 +422,25 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
         warnings.simplefilter("ignore", GridWarning)
         white = stationary_density_cartesian(osc, (min(nx, CARTESIAN_GRID[0]), min(ny, CARTESIAN_GRID[1])),
                                              float(h_max), walls=walls, points=3, check=False)
-    # the box holds all but FIT_TAIL of the white-noise density of the same intensity (more energy than the coloured)
+    # the box: first where all but FIT_TAIL of the white-noise density of the same intensity lies (it holds more
+    # energy: the OU filter passes less power at every frequency), then fitted to the coloured density on the coarse
+    # grid: twice the energy above which it holds TAIL_PROBE (an exponential tail then leaves TAIL_PROBE**2 above)
     above = 1.0 - np.cumsum(white.ring_mass)
     k = int(np.argmax(above <= FIT_TAIL)) if np.any(above <= FIT_TAIL) else len(above) - 1
     top = float(white.H_faces[k + 1])
     h = float(white.h_support)
     if top < white.h_min + 0.8 * (h - white.h_min):
         h = white.h_min + 1.25 * (top - white.h_min)
-    sd = solve_coloured(model, (nx, ny, nz), h, params=params, walls=walls, points=points, max_memory=max_memory)
+    coarse_grid = (max(8, nx // 2), max(8, ny // 2), max(6, nz // 2))
+    coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, max_memory=max_memory)
+    by_energy = np.argsort(coarse.cell_H)[::-1]
+    # absolute cell masses: a coarse solve may undershoot below zero in the tail
+    probe = float(coarse.cell_H[by_energy][np.argmax(np.cumsum(np.abs(coarse.cell_mass[by_energy])) > TAIL_PROBE)])
+    fitted = coarse.h_min + 2.0 * (probe - coarse.h_min)
+    if fitted < coarse.h_min + 0.8 * (h - coarse.h_min):
+        h, coarse = fitted, None
+    sd = solve_coloured(model, (nx, ny, nz), h, params=params, walls=walls, points=points, max_memory=max_memory,
+                        start=coarse)
     if h < h_max:
         from ..stationary import output_grid
 
@@ -442,8 +457,8 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
     if tail > 1e-4:
         warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of the box [min G, {h:.4g}]: raise h_max",
                       GridWarning, stacklevel=2)
-    coarse_grid = (max(8, nx // 2), max(8, ny // 2), max(6, nz // 2))
-    coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd)
+    if coarse is None:
+        coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd)
     sd._coarse, sd._order, sd._tail = (coarse, None), order, tail  # estimate_error on other bins
     est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101), order=order)
     sd.error_estimate = est
