@@ -238,22 +238,23 @@ class EnergyTable:
         tiny = self._orbits(np.array([1e-7, 2e-7]) * H1)["diffusion"]
         self.m_exp = round(2.0 * np.log2(tiny[1] / tiny[0])) / 2.0  # sigma2_bar ~ H**m near 0
 
-        def quantities(H):
-            o = self._orbits(H)
-            return {
-                "logT": np.log(o["T"]),
-                "lam": np.log(o["diffusion"]) - self.m_exp * np.log(H),
-                "g1": 2.0 * H * o["drift"] / o["diffusion"],
-                "x2": o["x2"] / o["T"],
-            }
-
-        f, Hn, vals = _fit_many(quantities, 0.0, H1, {"x2": 0.0})
+        f, Hn, vals = _fit_many(self._fitted_quantities, 0.0, H1, {"x2": 0.0})
         self.low = f
         kappa, nu = self._kappa(float(f["g1"](0.0)))
         # Phi_reg(H) = int_0^H (2 m/s2 - kappa/h) dh: fit (g1(h) - kappa)/h on the same nodes
         reg = (vals["g1"] - kappa) / Hn
         self.phi_reg = Cheb(cheb_coefficients(reg), 0.0, H1).antiderivative()
         self.phi_at_G = self.kappa * np.log(H1) + float(self.phi_reg(H1))
+
+    def _fitted_quantities(self, H):
+        """The smooth quantities fitted near H = 0 (the diffusion with its power law H**m_exp divided out)."""
+        o = self._orbits(H)
+        return {
+            "logT": np.log(o["T"]),
+            "lam": np.log(o["diffusion"]) - self.m_exp * np.log(H),
+            "g1": 2.0 * H * o["drift"] / o["diffusion"],
+            "x2": o["x2"] / o["T"],
+        }
 
     def _kappa(self, kappa):
         nu = kappa - self.m_exp
@@ -273,17 +274,7 @@ class EnergyTable:
         tiny = self._orbits(np.array([1e-7, 2e-7]) * top)["diffusion"]
         self.m_exp = round(2.0 * np.log2(tiny[1] / tiny[0])) / 2.0
 
-        def quantities(u):
-            H = u * u
-            o = self._orbits(H)
-            return {
-                "logT": np.log(o["T"]),
-                "lam": np.log(o["diffusion"]) - self.m_exp * np.log(H),
-                "g1": 2.0 * H * o["drift"] / o["diffusion"],
-                "x2": o["x2"] / o["T"],
-            }
-
-        f, un, vals = _fit_many(quantities, 0.0, U, {"x2": 0.0})
+        f, un, vals = _fit_many(lambda u: self._fitted_quantities(u * u), 0.0, U, {"x2": 0.0})
         kappa, nu = self._kappa(float(f["g1"](0.0)))
         # Phi_reg = int_0^H (2 m/s2 - kappa/h) dh = int_0^u 2 (g1 - kappa)/u' du'
         phi_reg = Cheb(cheb_coefficients(2.0 * (vals["g1"] - kappa) / un), 0.0, U).antiderivative()

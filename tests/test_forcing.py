@@ -282,6 +282,7 @@ def test_forced_duffing_impact_backends_agree():
     assert np.allclose(hey.state, sci.state, atol=1e-7)
 
 
+@pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
 def test_example_08_runs_headless_and_passes_its_checks():
     from examples_run import run_example
 
