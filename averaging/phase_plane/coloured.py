@@ -131,13 +131,16 @@ class _Levels:
         self.z = 0.5 * (self.z_faces[1:] + self.z_faces[:-1])
         n = grid.n
         zero = np.zeros(1)
-        self.levels = []
-        for zk in self.z:
-            def m_nc(x, y, zk=zk):
-                return base(x, y) + osc.restoring(x) + drive(x, y) * zk
 
-            coef = Coefficients(osc.restoring, osc.potential, m_nc, lambda x, y: zero, law)
-            self.levels.append(CartesianDiscretisation(grid, coef, law))
+        def m_nc(x, y):  # the level eta = 0; each level replaces the drift (operator_with_drift)
+            return base(x, y) + osc.restoring(x)
+
+        self.plane = CartesianDiscretisation(grid, Coefficients(osc.restoring, osc.potential, m_nc,
+                                                                lambda x, y: zero, law), law)
+        xs, ys = self.plane.drift_points()
+        m0 = np.broadcast_to(np.asarray(base(xs, ys), dtype=float), xs.shape)
+        f = np.broadcast_to(np.asarray(drive(xs, ys), dtype=float), xs.shape)
+        self.levels = [self.plane.operator_with_drift(m0 + f * zk) for zk in self.z]
         # eta fluxes (Scharfetter-Gummel) between levels k and k+1: out of k  (kappa/h) [B(-Pe) p_k - B(Pe) p_k+1]
         zf = self.z_faces[1:-1]
         Pe = -alpha * zf * self.hz / kappa
@@ -148,7 +151,7 @@ class _Levels:
         self.Z = Z
         area = grid.hx * grid.hy
         self.coupling = area / self.hz  # plane operators are per unit eta depth
-        self.A = (sps.block_diag([d.A for d in self.levels]) + sps.kron(Z, sps.identity(n) * self.coupling)).tocsr()
+        self.A = (sps.block_diag(self.levels) + sps.kron(Z, sps.identity(n) * self.coupling)).tocsr()
         self.mass_weight = np.full(n * nz, area * self.hz)
 
     def solve(self, start, rtol: float = 1e-10):
@@ -164,8 +167,8 @@ class _Levels:
         Zd = self.Z.diagonal() * self.coupling
         lower = self.Z.diagonal(-1) * self.coupling
         upper = self.Z.diagonal(1) * self.coupling
-        lus = [spla.splu((d.A + sps.identity(n) * Zd[k]).tocsc(), permc_spec="COLAMD")
-               for k, d in enumerate(self.levels)]
+        lus = [spla.splu((level + sps.identity(n) * Zd[k]).tocsc(), permc_spec="COLAMD")
+               for k, level in enumerate(self.levels)]
 
         def precondition(r):
             r = r.reshape(nz, n)
@@ -231,7 +234,7 @@ class ColouredDensity(CartesianDensity):
     def __init__(self, filtered, osc, grid, levels: _Levels, p, timing, walls, iterations):
         P = p.reshape(levels.nz, grid.n)
         marginal = P.sum(axis=0) * levels.hz
-        super().__init__(osc, grid, _PlaneView(levels.levels[0]), marginal, timing, walls)
+        super().__init__(osc, grid, _PlaneView(levels.plane), marginal, timing, walls)
         self.filtered = filtered
         self.levels = levels
         self.cell_p3 = P
