@@ -64,12 +64,16 @@ class FilteredAutomaton(HybridAutomaton):
         The filter's parameters: each must be a positive finite number.
     positive, nonnegative : tuple of str
         The wrapped model's parameters that must be > 0 (barrier distances; inf allowed) or >= 0 (intensities).
+    oscillator : ImpactOscillator or None
+        The oscillator the filter was attached to (None for a general automaton): its potential, walls and
+        restitution law, for the coloured-noise density solver (``averaging.phase_plane.coloured``).
     """
 
     filter: Mapping = field(default_factory=dict)
     bandwidths: tuple = ()
     positive: tuple = ()
     nonnegative: tuple = ()
+    oscillator: object = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         super().__post_init__()
@@ -248,6 +252,7 @@ def _build(model, kind: str, values: dict, names: dict, b_expr, w2_expr, state: 
         states=tuple(base.states) + tuple(new), parameters=params, modes=modes, transitions=transitions,
         initial_mode=base.initial_mode, observables=base.observables, filter=info,
         bandwidths=tuple(names.get(k, k) for k in values), positive=base.positive, nonnegative=base.nonnegative,
+        oscillator=model if isinstance(model, ImpactOscillator) else None,
     )
 
 

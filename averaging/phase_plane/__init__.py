@@ -56,6 +56,13 @@ on the exact elastic density, 1.75 on Fig. 2 (Ma, delta = 1); 1.3 for E[H] with 
 (the wall meets the equilibrium at a corner of the domain). The outer ring at ``h_max`` is reflecting: choose
 h_max in the tail (a warning says when it is not).
 
+Coloured noise
+--------------
+A model driven by Ornstein-Uhlenbeck noise (``models.excitation.ou_filter``) has a stationary density of
+(x, y, eta): :func:`stationary_density_coloured` (module :mod:`averaging.phase_plane.coloured`) solves it on
+Cartesian (x, y) levels of eta coupled by the filter's drift and diffusion, with the same impact map, and returns
+the (x, y)-marginal with this interface (p(H), p(x, y)) and the eta-marginal.
+
 First passage and spectra
 -------------------------
 The assembled operator is kept on the result (``PhaseDensity.discretisation``): its adjoint is the backward
@@ -73,6 +80,7 @@ Examples
 
 from __future__ import annotations
 
+from .coloured import ColouredDensity, stationary_density_coloured
 from .forced import PeriodicDensity, periodic_density_xy
 from .passage import Domain, FirstPassage, PassageWarning, crossing_rate, first_passage_fpk
 from .solver import DEFAULT_GRID, SCHEMES, GridWarning, PhaseDensity, solve_phase_plane, stationary_density_xy
@@ -81,6 +89,7 @@ from .spectrum import Spectrum, spectrum_fpk
 METHOD = "fpk"
 """Name of this method family (beside the averaging methods ``paper``, ``exact-two-impact``, ``jump``)."""
 
-__all__ = ["DEFAULT_GRID", "METHOD", "SCHEMES", "Domain", "FirstPassage", "GridWarning", "PassageWarning",
-           "PeriodicDensity", "PhaseDensity", "Spectrum", "crossing_rate", "first_passage_fpk", "periodic_density_xy",
-           "solve_phase_plane", "spectrum_fpk", "stationary_density_xy"]
+__all__ = ["ColouredDensity", "DEFAULT_GRID", "METHOD", "SCHEMES", "Domain", "FirstPassage", "GridWarning",
+           "PassageWarning", "PeriodicDensity", "PhaseDensity", "Spectrum", "crossing_rate", "first_passage_fpk",
+           "periodic_density_xy", "solve_phase_plane", "spectrum_fpk", "stationary_density_coloured",
+           "stationary_density_xy"]

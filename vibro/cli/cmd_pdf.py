@@ -54,6 +54,12 @@ def register(subparsers) -> None:
     p.add_argument("--scheme", choices=("auto", "rings", "cartesian"), default="auto",
                    help="--method fpk: energy-angle rings (single well) or Cartesian cells (any number of wells, "
                         "e.g. a double-well Duffing with a < 0); auto (default) picks rings for a single well")
+    p.add_argument("--filter", default=None, choices=("ou",),
+                   help="drive the model by Ornstein-Uhlenbeck (coloured) noise of the same intensity, bandwidth "
+                        "--param alpha=A (default 1): the density of (x, y, eta) by --method fpk on a 3-D grid "
+                        "(averaging assumes white noise)")
+    p.add_argument("--levels", type=int, default=None, metavar="NZ",
+                   help="--filter: levels of the filter output eta (default 32); cells x levels cost ~ the product")
     p.add_argument("--phases", type=int, default=0, metavar="N",
                    help="--method fpk, forced models: also write p(H), p(x) and p(y) at the N phases k T / N of the "
                         "forcing period, in the columns of vibro mc --phases (--phases-out)")
@@ -220,6 +226,75 @@ def _run_forced(args, model, plan) -> int:
     return 0
 
 
+def _filtered_model(args):
+    """The OU-filtered oscillator of ``--filter``: --param sets the oscillator's parameters and the filter's alpha."""
+    from models.excitation import ou_filter
+
+    from .common import model_from_args, parse_params
+
+    params = parse_params(args.param)
+    plain = argparse.Namespace(**{**vars(args), "param": []})
+    osc = model_from_args(plain)
+    if getattr(osc, "is_forced", False):
+        raise ParameterError(f"--filter: {osc.name!r} is forced; the coloured-noise density is for autonomous models")
+    own = {k: v for k, v in params.items() if k in osc.params}
+    osc = osc.with_params(**own) if own else osc
+    rest = {k: v for k, v in params.items() if k not in own}
+    unknown = sorted(set(rest) - {"alpha"})
+    if unknown:
+        raise ParameterError(f"--param {unknown[0]}: not a parameter of {osc.name!r} {sorted(osc.params)} nor of the "
+                             "OU filter (alpha)")
+    return ou_filter(osc, alpha=rest.get("alpha", 1.0))
+
+
+def _run_filtered(args, model, plan) -> int:
+    """An OU-filtered model by ``fpk``: the (x, y)-marginal's p(H) in OUT, p(x, y) with --joint."""
+    import time
+
+    import numpy as np
+
+    from averaging.phase_plane.coloured import COLOURED_GRID, stationary_density_coloured
+    from vibro.provenance import record, sidecar_path, write_sidecar
+
+    started = time.perf_counter()
+    grid = tuple(args.grid) if args.grid is not None else COLOURED_GRID[:2]
+    grid = (*grid, COLOURED_GRID[2] if args.levels is None else args.levels)
+    sd = stationary_density_coloured(model, grid=grid, h_max=args.h_max, points=args.points)
+    _check_resolved(args, sd)
+    if args.joint is not None:
+        (lo, hi), ymax = sd.box()
+        x = np.linspace(lo, hi, args.joint_points)
+        y = np.linspace(-ymax, ymax, args.joint_points)
+        pxy = sd.joint(x, y)
+        _check_resolved(args, sd, (x, y, pxy))
+        X, Y = np.meshgrid(x, y)
+    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    written = [args.out]
+    if args.joint is not None:
+        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+        written.append(args.joint)
+    results = {"mean_energy": sd.mean_energy, "prob_below_barrier": sd.prob_below_barrier, "mean_x2": sd.mean_x2,
+               "impact_rate": sd.impact_rate, "eta_variance": sd.eta_variance, "mean_eta2": sd.mean_eta2,
+               "error_estimate": sd.error_estimate, "gmres_iterations": sd.iterations}
+    settings = {"method": "fpk", "scheme": sd.scheme, "filter": "ou", "alpha": sd.alpha, "h_max": args.h_max,
+                "points": args.points, "grid": list(grid)}
+    noise = {"text": f"OU-filtered noise, alpha = {sd.alpha:g}, Var eta = alpha D = {sd.eta_variance:.6g}"}
+    rec = record("pdf", model=model, settings=settings, results=results, started=started, noise=noise)
+    write_sidecar(args.out, rec)
+    if args.joint is not None:
+        write_sidecar(args.joint, {**rec, "output": "joint",
+                                   "settings": {**rec["settings"], "joint_points": args.joint_points}})
+    osc = model.oscillator
+    print(f"model {osc.name} {dict(osc.params)} restitution {osc.restitution.spec()} method fpk (OU-filtered noise, "
+          f"alpha {sd.alpha:g}, grid {grid[0]} x {grid[1]} x {grid[2]} levels of eta, {sd.iterations} GMRES "
+          "iterations)")
+    print(f"noise: {noise['text']}")
+    print(f"E[H] = {sd.mean_energy:.8g}   E[x^2] = {sd.mean_x2:.8g}   impact rate = {sd.impact_rate:.8g}")
+    print(f"estimated L1 error of p(H): {sd.error_estimate:.3g} ({sd.error_method})")
+    print("wrote " + ", ".join(str(w) for w in written) + f"; provenance in {sidecar_path(args.out)}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``vibro pdf``; bad input raises a VibroError (exit status 2)."""
     import time
@@ -253,6 +328,16 @@ def run(args: argparse.Namespace) -> int:
     plan.file(args.out, "--out", sidecar=True)
     if args.joint is not None:
         plan.file(args.joint, "--joint", sidecar=True)
+    if args.filter:  # coloured noise: only the fpk solver on (x, y, eta)
+        if args.method not in ("fpk", "auto"):
+            raise ParameterError(f"--filter {args.filter}: --method {args.method} assumes white noise; use --method "
+                                 "fpk (the density of the filtered model) or vibro mc --filter")
+        if args.phases:
+            raise ParameterError("--phases needs a forced model, not --filter")
+        args.method = "fpk"
+        return _run_filtered(args, _filtered_model(args), plan)
+    if args.levels is not None:
+        raise ParameterError("--levels applies to a filtered model (--filter ou)")
     model = model_from_args(args)
     forced = bool(getattr(model, "is_forced", False))
     if args.phases and not (forced and args.method in ("fpk", "auto")):
