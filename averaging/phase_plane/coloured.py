@@ -464,8 +464,8 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
                       GridWarning, stacklevel=2)
     if coarse is None:
         coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd)
-    sd._coarse, sd._order, sd._tail = (coarse, None), order, tail  # estimate_error on other bins
-    est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101), order=order)
+    sd._coarse_solve, sd._estimate_order = coarse, float(order)  # estimate_error on other bins
+    est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101)) + tail
     sd.error_estimate = est
     sd.error_method = (f"two grids: L1(p on {(nx, ny, nz)}, p on {coarse_grid}) / (2**{order:g} - 1) (Richardson) "
                        f"+ {tail:.2g} (probability in the top 10 % of the box)")

@@ -189,7 +189,7 @@ def _run_forced(args, model, plan) -> int:
         atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
         written.append(args.joint)
     if phase_table is not None:
-        atomic_write_text(phases_path(args), phase_table.to_csv(index=False, float_format="%.17g"))
+        atomic_write_text(phases_path(args), phase_table.tocsv_text(index=False, float_format="%.17g"))
         written.append(str(phases_path(args)))
     results = {"mean_energy": sol.mean_energy, "impact_rate": sol.impact_rate, "mean_x2": sd.mean_x2,
                "prob_below_barrier": sd.prob_below_barrier, "periodicity": sol.periodicity,
@@ -268,10 +268,10 @@ def _run_filtered(args, model, plan) -> int:
         pxy = sd.joint(x, y)
         _check_resolved(args, sd, (x, y, pxy))
         X, Y = np.meshgrid(x, y)
-    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    atomic_write_text(args.out, csv_text({"H": sd.H, "p": sd.p}))
     written = [args.out]
     if args.joint is not None:
-        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+        atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
         written.append(args.joint)
     results = {"mean_energy": sd.mean_energy, "prob_below_barrier": sd.prob_below_barrier, "mean_x2": sd.mean_x2,
                "impact_rate": sd.impact_rate, "eta_variance": sd.eta_variance, "mean_eta2": sd.mean_eta2,
