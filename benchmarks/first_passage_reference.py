@@ -117,8 +117,9 @@ def combine(runs):
 
 
 def reference():
-    """Per level: the corrected runs per step, each step's difference from the finest with its CI, and the pooled
-    reference (inverse-variance weights); R(t) at H_c = 0.25 with its Wilson interval. Writes REFERENCE."""
+    """Per level: the corrected runs per step and each step's difference from the finest with its CI; the
+    reference is their inverse-variance pool where every difference lies within its CI, else the finest step
+    alone. R(t) at H_c = 0.25 (all its corrected runs) with its Wilson interval. Writes REFERENCE."""
     from hybrid.stochastic._passage import _wilson
 
     runs = [r for r in load_runs() if r["corrected"]]
@@ -133,18 +134,23 @@ def reference():
             per_dt[dt] = combine([r for r in runs if r["H_c"] == H_c and r["dt"] == dt])
         if not per_dt:
             continue
-        w = {dt: 1 / v["ci95"] ** 2 for dt, v in per_dt.items()}
-        mean = sum(w[dt] * v["mean"] for dt, v in per_dt.items()) / sum(w.values())
-        ci = 1 / math.sqrt(sum(w.values()))
-        row = {"mean": mean, "ci95": ci, "relative_ci95": ci / mean,
+        steps = sorted(per_dt, reverse=True)
+        fine = per_dt[steps[-1]]
+        differences = {f"{dt:g}-{steps[-1]:g}": [per_dt[dt]["mean"] - fine["mean"],
+                                                 math.hypot(per_dt[dt]["ci95"], fine["ci95"])] for dt in steps[:-1]}
+        # an O(dt) residual of the correction shows as a step difference beyond its CI: then the finest step alone
+        pooled = len(steps) >= 2 and all(abs(d) <= ci for d, ci in differences.values())
+        if pooled:
+            w = {dt: 1 / v["ci95"] ** 2 for dt, v in per_dt.items()}
+            mean = sum(w[dt] * v["mean"] for dt, v in per_dt.items()) / sum(w.values())
+            ci = 1 / math.sqrt(sum(w.values()))
+        else:
+            mean, ci = fine["mean"], fine["ci95"]
+        row = {"mean": mean, "ci95": ci, "relative_ci95": ci / mean, "pooled_over_steps": pooled,
+               "reference_steps": [float(dt) for dt in (steps if pooled else steps[-1:])],
+               "step_differences": differences,
                "steps": {str(dt): {k: v for k, v in c.items() if k not in ("R", "times")}
                          for dt, c in per_dt.items()}}
-        steps = sorted(per_dt, reverse=True)
-        if len(steps) >= 2:  # each step against the finest: an O(dt) residual of the correction would show here
-            fine = per_dt[steps[-1]]
-            row["step_differences"] = {f"{dt:g}-{steps[-1]:g}": [per_dt[dt]["mean"] - fine["mean"],
-                                                                  math.hypot(per_dt[dt]["ci95"], fine["ci95"])]
-                                       for dt in steps[:-1]}
         if H_c == 0.25:  # R(t): every corrected run pooled (their steps agree)
             n = sum(c["paths"] for c in per_dt.values())
             R = sum(c["paths"] * c["R"] for c in per_dt.values()) / n
