@@ -43,7 +43,14 @@ def test_the_reference_is_converged_in_the_time_step_and_holds_about_one_percent
             assert row["mean"] == row["steps"][finest]["mean"]
 
 
-@pytest.mark.parametrize("level", ["0.25", "0.5", "1.0"])
+UNRESOLVED = pytest.mark.xfail(strict=True, reason=(
+    "fpk (60x64 and up to 240x256) is 1.2-1.6 % above the Monte Carlo reference at H_c = 1.5 and 2.0, beyond the "
+    "reference's 0.7 % CI and fpk's own two-grid estimate: either fpk's error at hard impacts or an O(dt) residual of "
+    "the Monte Carlo's level correction (docs/results/first-passage-spectra.md)"))
+
+
+@pytest.mark.parametrize("level", ["0.25", "0.5", "1.0", pytest.param("1.5", marks=UNRESOLVED),
+                                   pytest.param("2.0", marks=UNRESOLVED)])
 def test_fpk_mean_first_passage_time_meets_the_monte_carlo_reference(reference, level):
     row = reference[level]
     r = first_passage_fpk(example1(), f"H < {level}", grid=(60, 64), check=True, survival=False)

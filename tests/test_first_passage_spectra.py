@@ -105,16 +105,13 @@ def test_a_level_domain_gives_the_poisson_estimate_from_rices_rate():
     assert np.allclose(r.poisson, np.exp(-nu * r.t))
 
 
-REFERENCE_MFPT_2 = 121.2
-"""Example 1's mean first passage from rest to H = 2, event-exact Monte Carlo of issue 26 (40,000 paths, two time
-steps, CI about 0.8 %): its table puts paper (102.80) 15 % and jump (99.61) 18 % short, i.e. 120.9-121.5."""
 
 
-def test_example_1_mean_first_passage_at_hard_impacts_is_within_one_percent_and_fast():
-    # averaging is 15-18 % short at H_c = 2, where every orbit impacts hard; fpk measured 120.85 (120x128)
+def test_example_1_mean_first_passage_at_hard_impacts_is_fast_with_a_small_error_estimate():
+    # averaging is 14-16 % short at H_c = 2, where every orbit impacts hard; fpk measured 120.85 (120x128); against
+    # the Monte Carlo reference: tests/test_first_passage_reference.py
     m = DuffingImpact(restitution=Ma(vc=0.4))
     r = first_passage_fpk(m, "H < 2.0", grid=(120, 128), check=True, survival=False)
-    assert abs(r.mean_time / REFERENCE_MFPT_2 - 1) < 0.01, r.mean_time
     assert r.error_estimate < 0.01 * r.mean_time  # from the grid 60 x 64: 0.08
     # CPU seconds of the solve (the goal is 2 s; measured 0.45 s on one core)
     assert r.details["cpu_seconds"] < 2.0
