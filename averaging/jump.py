@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
-from scipy.special import roots_jacobi
 
 from .methods import ImpactMethod
+from .quadrature import gauss_jacobi
 
 _CELL_NODES = 5
 
@@ -65,13 +65,13 @@ def cell_quadrature(grid, levels, nu: float, k: int = _CELL_NODES):
         first[0] = True
         if zero:  # p dH = u**(2 nu) exp(R) 2 u du
             beta = 2.0 * nu + 1.0
-            t, w = roots_jacobi(k, 0.0, beta)
+            t, w = gauss_jacobi(k, 0.0, beta)
             ub = np.sqrt(b[0])
             u = 0.5 * ub * (t + 1.0)
             Hs.append(u * u)
             ws.append(2.0 * w * (0.5 * ub) ** (beta + 1.0) / u ** (2.0 * nu))
         else:
-            t, w = roots_jacobi(k, 0.0, nu)
+            t, w = gauss_jacobi(k, 0.0, nu)
             h = 0.5 * b[0] * (t + 1.0)
             Hs.append(h)
             ws.append(w * (0.5 * b[0]) ** (nu + 1.0) / h**nu)

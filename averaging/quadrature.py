@@ -33,6 +33,35 @@ def _gauss(n: int):
     return _GL_CACHE[n]
 
 
+def gauss_jacobi(n: int, alpha: float, beta: float):
+    """Nodes and weights of the n-point Gauss-Jacobi rule for the weight (1 - t)**alpha (1 + t)**beta on (-1, 1).
+
+    Golub-Welsch: the eigenvalues of the Jacobi matrix of the monic recurrence are the nodes, the squared first
+    components of its eigenvectors times the weight's integral the weights. The same rule as
+    ``scipy.special.roots_jacobi`` to about 1e-15 in the nodes and in the integrals (very small weights near an end
+    agree to a relative 1e-8 at n = 129, beta = 7.5), without importing scipy.special (0.1-0.2 s of start-up).
+
+    Examples
+    --------
+    >>> t, w = gauss_jacobi(6, 0.0, 1.5)
+    >>> exact = 2**4.5 / 4.5 - 2 * 2**3.5 / 3.5 + 2**2.5 / 2.5  # int (1 + t)**1.5 t**2 over (-1, 1)
+    >>> bool(abs(np.sum(w * t**2) - exact) < 1e-13)
+    True
+    """
+    import math
+
+    ab = alpha + beta
+    k = np.arange(1, n, dtype=float)
+    diag = np.empty(n)
+    diag[0] = (beta - alpha) / (ab + 2.0)
+    diag[1:] = (beta * beta - alpha * alpha) / ((2.0 * k + ab) * (2.0 * k + ab + 2.0))
+    off = np.sqrt(4.0 * k * (k + alpha) * (k + beta) * (k + ab)
+                  / ((2.0 * k + ab) ** 2 * (2.0 * k + ab + 1.0) * (2.0 * k + ab - 1.0)))
+    nodes, vectors = np.linalg.eigh(np.diag(diag) + np.diag(off, 1) + np.diag(off, -1))
+    mass = 2.0 ** (ab + 1.0) * math.exp(math.lgamma(alpha + 1.0) + math.lgamma(beta + 1.0) - math.lgamma(ab + 2.0))
+    return nodes, mass * vectors[0] ** 2
+
+
 class Geometry:
     """The potential G, the force g, the walls and their impact levels of a model at its parameter values (numpy).
 

@@ -25,6 +25,7 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
+from hybrid.automaton import lambdify_numeric
 from models import X, Y
 
 S = sp.Symbol("s", positive=True)
@@ -203,8 +204,8 @@ class AveragingEquations:
         syms = [self.model.parameter_symbols[k] for k in names]
         args = [X, S, *syms]
         # dummify: the orbit variable s and a user's parameter named s are two symbols with one name
-        drift = sp.lambdify(args, self._w_drift, modules="numpy", dummify=True)
-        diffusion = sp.lambdify(args, self._w_diffusion, modules="numpy", dummify=True)
+        drift = lambdify_numeric(args, self._w_drift, dummify=True)
+        diffusion = lambdify_numeric(args, self._w_diffusion, dummify=True)
         return _Kernels(drift, diffusion, names)
 
     @property
@@ -221,7 +222,7 @@ class AveragingEquations:
             return None
         names = tuple(self.model.params)
         args = [X, *[self.model.parameter_symbols[k] for k in names]]
-        return (sp.lambdify(args, G, modules="numpy"), sp.lambdify(args, self.model.g, modules="numpy"), names)
+        return (lambdify_numeric(args, G), lambdify_numeric(args, self.model.g), names)
 
 
 _CACHE: dict[str, AveragingEquations] = {}

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
-from scipy.sparse.linalg import splu
 
 from hybrid.errors import ParameterError
 from hybrid.sizes import check_size
@@ -146,6 +145,8 @@ def _implicit_euler(A, pi, times, dt):
     step = dt if dt is not None else max(times[-1], 1e-300) / 200.0
     if not step > 0:
         raise ParameterError(f"dt={dt!r} must be positive")
+    from scipy.sparse.linalg import splu  # here only: start-up of commands that need no transient
+
     eye = sparse.identity(A.shape[0], format="csc")
     lu = splu((eye - step * A).tocsc())
     out = np.empty((len(times), len(pi)))
@@ -241,6 +242,8 @@ def mean_first_passage_time(model, H_c: float, H0=0.0, method="paper", points: i
     H0a = np.asarray(H0, dtype=float)
     if not np.all((H0a >= 0) & (H0a <= H_c)):  # also refuses NaN
         raise ParameterError(f"starting energies must lie in [0, H_c={H_c:g}]")
+    from scipy.sparse.linalg import splu
+
     chain = EnergyChain(energy_table(model, H_c, nodes), grid, m, model.restitution)
     Q = chain.generator().tocsc()
     n = len(grid) - 1  # the last node is absorbing

@@ -4,12 +4,15 @@ time, phase-resolved.
 1. The forced Duffing impact oscillator of example 08 (c = 0.1, A = 0.5, Omega = 1.2, Newton r = 0.8, walls at
    +-1) at D = 0.02 and D = 0.05: L1 of p(H | t_k) on 40 bins of [0, 4] at the 16 phases t_k = k T / 16 against
    the Monte Carlo of ``vibro mc --phases 16`` (splitting, dt = T / 1056, 128 paths x 3000 periods per seed; the
-   histograms are stored in ``benchmarks/data/fpk_forced_mc.npz``). The Monte Carlo noise is stated as the L1
-   between two independent seeds divided by 2 (the noise of their mean, for independent bins).
+   histograms are stored in ``benchmarks/data/fpk_forced_mc.npz``). The Monte Carlo noise is the L1 between two
+   independent seeds over sqrt(2), divided by sqrt(seeds) for their mean. The baseline, measured in the same run,
+   is the previous default: the energy-angle rings (120, 128) with 64 Crank-Nicolson steps.
 2. The linear oscillator without walls (c = 0.5, w0 = 1, W = 1.3, A = 0.4, D = 0.05): the largest relative error
-   of the section means (relative to the response amplitude) and variances against the closed form.
+   over 8 sections of the means of x and y (relative to their amplitudes) and of their variances, against the
+   closed form (Gaussian sections, mean = the periodic response, variance D / c).
 
-Times are CPU seconds (``time.process_time``, 2 shared cores); memory is the peak resident size.
+Times are CPU seconds (``time.process_time``, 2 shared cores), the check's solve on the grid twice coarser
+included; memory is the peak resident size of the process so far (the runs go from small to large).
 Run: ``python benchmarks/fpk_forced.py [--quick]``.
 """
 
@@ -25,6 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from averaging.phase_plane.cartesian import moments  # noqa: E402
 from averaging.phase_plane.forced import periodic_density_xy  # noqa: E402
 from models import ForcedDuffingImpact, ImpactOscillator, Newton  # noqa: E402
 
@@ -61,68 +65,83 @@ def duffing(D: float):
     return ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=D)
 
 
-def against_mc(grids, D: str = "0.02"):
+def against_mc(runs, D: str = "0.02"):
+    """``runs``: (label, keyword arguments of periodic_density_xy); the first is the baseline."""
     edges, ref, noise = mc_reference(D)
     eh, eh_ci, rate = mc_summary(D)
     print(f"Forced Duffing, D = {D}: L1 of p(H | t_k) on {len(edges) - 1} bins against Monte Carlo "
           f"(noise {noise.mean():.4f} mean, {noise.max():.4f} max over the phases); Monte Carlo time-averaged "
           f"E[H] = {eh:.5f} ± {eh_ci:.5f}, impact rate {rate:.5f}")
-    print("   grid        steps  cells   factors  GMRES   CPU s   wall s   peak MB   L1 mean   L1 max    E[H]    "
-          "impact rate")
-    rows, masses_of = [], {}
-    for grid, steps in grids:
-        t0, w0 = time.process_time(), time.perf_counter()
-        sol = periodic_density_xy(duffing(float(D)), grid=grid, steps=steps, h_max=4.0, phases=PHASES)
-        cpu, wall = time.process_time() - t0, time.perf_counter() - w0
-        masses = np.array([s.bin_masses(edges) for s in sol.sections(PHASES)])
-        masses_of[grid] = (masses, cpu)
-        l1 = np.abs(masses - ref).sum(axis=1)
+    print("   run                                  cells  factors  maps   CPU s  peak MB  L1 mean  L1 max   estimate"
+          "   E[H]    impact rate")
+    base = None
+    for label, kw in runs:
+        t0 = time.process_time()
+        sol = periodic_density_xy(duffing(float(D)), h_max=4.0, phases=PHASES, **kw)
+        cpu = time.process_time() - t0
+        l1 = np.array([np.abs(s.bin_masses(edges) - r).sum() for s, r in zip(sol.sections(PHASES), ref)])
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        print(f"   {str(grid):11s} {steps:5d}  {sol.grid.n:6d}  {sol.factors:7d}  {sol.iterations:5d}  {cpu:6.1f}  "
-              f"{wall:7.1f}  {peak:8.0f}   {l1.mean():.4f}    {l1.max():.4f}   {sol.mean_energy:.4f}  "
-              f"{sol.impact_rate:.4f}")
-        rows.append((grid, steps, l1))
-    for (g1, (m1, c1)), (g2, (m2, c2)) in zip(list(masses_of.items()), list(masses_of.items())[1:]):
-        if g2 == (2 * g1[0], 2 * g1[1]):
-            l1 = np.abs((4.0 * m2 - m1) / 3.0 - ref).sum(axis=1)
-            print(f"   Richardson {g1} + {g2}: CPU {c1 + c2:.1f} s, L1 {l1.mean():.4f} mean, {l1.max():.4f} max: "
-                  + " ".join(f"{v:.4f}" for v in l1))
-    grid, steps, l1 = rows[-1]
-    print(f"   per phase at {grid}, {steps} steps: " + " ".join(f"{v:.4f}" for v in l1))
-    print("   Monte Carlo noise per phase:           " + " ".join(f"{v:.4f}" for v in noise))
-    return rows
+        est = "-" if sol.error_estimate is None else f"{sol.error_estimate:.4f}"
+        print(f"   {label:36s} {sol.grid.n:6d}  {sol.factors:6d}  {sol.iterations:4d}  {cpu:6.1f}  {peak:7.0f}  "
+              f"{l1.mean():.4f}   {l1.max():.4f}   {est:8s}  {sol.mean_energy:.4f}  {sol.impact_rate:.4f}", flush=True)
+        if base is None:
+            base = (l1.mean(), cpu)
+        else:
+            print(f"      against the baseline: L1 {base[0] / l1.mean():.1f}x smaller, CPU {cpu / base[1]:.2f}x; "
+                  "per phase: " + " ".join(f"{v:.4f}" for v in l1))
+    print("   Monte Carlo noise per phase: " + " ".join(f"{v:.4f}" for v in noise))
 
 
-def linear(grids):
+def linear(runs):
     c, w0, W, A, D = 0.5, 1.0, 1.3, 0.4, 0.05
     model = ImpactOscillator("w0**2*x", "c*y", forcing="A*cos(W*t)", barriers=None,
                              parameters={"c": c, "w0": w0, "W": W, "A": A, "D": D})
     z = A / (w0**2 - W**2 + 1j * c * W)
     var = D / (c * w0**2)
     print("Linear oscillator, no walls: largest relative error over 8 sections (mean / amplitude, variance)")
-    print("   grid        steps   CPU s   mean      variance")
-    for grid, steps in grids:
+    print("   run                                  CPU s   mean      variance  estimate")
+    for label, kw in runs:
         t0 = time.process_time()
-        sol = periodic_density_xy(model, grid=grid, steps=steps, h_max=4.0, phases=8)
+        sol = periodic_density_xy(model, h_max=3.0, phases=8, **kw)
         cpu = time.process_time() - t0
         err_m, err_v = 0.0, 0.0
         for t, s in zip(sol.phase_times(8), sol.sections(8)):
-            mx = float(s.cell_mass @ s.cell_x)
-            vx = float(s.cell_mass @ s.cell_x**2) - mx**2
-            err_m = max(err_m, abs(mx - (z * np.exp(1j * W * t)).real) / abs(z))
-            err_v = max(err_v, abs(vx / var - 1.0))
-        print(f"   {str(grid):11s} {steps:5d}  {cpu:6.1f}   {err_m:.2e}  {err_v:.2e}")
+            if sol.cells == "cartesian":
+                _h, ex2, ey2, mx, my = moments(s.grid, model.potential, s.cell_p)
+            else:
+                mx, my = s.cell_mass @ s.cell_x, s.cell_mass @ s.cell_y
+                ex2, ey2 = s.cell_mass @ s.cell_x**2, s.cell_mass @ s.cell_y**2
+            err_m = max(err_m, abs(mx - (z * np.exp(1j * W * t)).real) / abs(z),
+                        abs(my - (1j * W * z * np.exp(1j * W * t)).real) / abs(W * z))
+            err_v = max(err_v, abs((ex2 - mx**2) / var - 1.0), abs((ey2 - my**2) / var - 1.0))
+        est = "-" if sol.error_estimate is None else f"{sol.error_estimate:.1e}"
+        print(f"   {label:36s} {cpu:6.1f}   {err_m:.2e}  {err_v:.2e}  {est}", flush=True)
+
+
+RINGS = {"cells": "rings", "grid": (120, 128), "scheme": "cn", "steps": 64, "check": False}
+"""The baseline: the previous default (energy-angle rings, Crank-Nicolson with 64 steps)."""
 
 
 def main(quick: bool) -> None:
-    # consecutive grids a factor 2 apart with the same steps also give the Richardson row
-    grids = [((60, 64), 64), ((120, 128), 64)]
+    runs = [("baseline: rings (120, 128), CN 64", RINGS),
+            ("(40, 80), CN 32 + 64", {"grid": (40, 80)}),
+            ("(60, 120), CN 32 + 64 (default)", {})]
     if not quick:
-        grids += [((80, 96), 64), ((160, 192), 64)]
-    against_mc(grids, "0.02")
+        runs += [("(60, 120), CN 64 alone", {"scheme": "cn", "steps": 64}),
+                 ("(60, 120), CN 16 + 32", {"steps": 16}),
+                 ("(80, 160), CN 32 + 64", {"grid": (80, 160)})]
+    against_mc(runs, "0.02")
     if not quick:
-        against_mc(grids[:2], "0.05")
-    linear(grids[:2] if quick else [grids[0], grids[1], grids[3]])
+        against_mc(runs[:3], "0.05")
+    lin = [("rings (120, 128), CN 64", {**RINGS, "grid": (120, 128)}),
+           ("(32, 32), CN 64 alone", {"grid": (32, 32), "scheme": "cn", "steps": 64, "check": False}),
+           ("(32, 32), CN 16 + 32", {"grid": (32, 32), "steps": 16}),
+           ("(32, 32), CN 32 + 64", {"grid": (32, 32), "steps": 32}),
+           ("(64, 64), CN 32 + 64", {"grid": (64, 64), "steps": 32})]
+    if not quick:
+        lin += [("(32, 32), CN 64 + 128", {"grid": (32, 32), "steps": 64}),
+                ("(60, 120), CN 32 + 64", {"grid": (60, 120)})]
+    linear(lin if not quick else lin[1:4])
 
 
 if __name__ == "__main__":

@@ -13,6 +13,17 @@ effect of f32 on p(H) (same seed, so the same Philox words drive both). Compilat
 (each side's first call is a small warm-up run).
 
 Without a GPU (and without the simulator) the GPU part is skipped with the reason; the CPU part still runs.
+
+    python benchmarks/gpu_throughput.py --automata [--quick]   # the automaton kernel, per model
+
+``--automata``: the CUDA kernel generated from the automaton code generator (``simulate_automaton(...,
+scheduler="cuda")``) on every model of issue 22, item 2: Example 1 (symplectic, H histogram of 400 bins), the stop
+at the equilibrium, the impact pair, the vibrating table, the forced Example 1 with 8 phase sections and Example 1
+driven by OU noise, each at dt = 1e-3. Per model it prints the CPU kernel's path-steps/s (all threads of this
+machine, wall time of a warm run), the GPU's (launch loop only, warm), their ratio, and the compiled kernel's
+registers per thread, local memory, shared memory and the occupancy they allow. Without a GPU it stops at once
+with one line (exit 2); with ``NUMBA_ENABLE_CUDASIM=1`` it runs tiny sizes on the simulator (a check, not a
+timing).
 """
 
 from __future__ import annotations
@@ -55,8 +66,138 @@ def describe_device() -> str:
     return f"{dev.name.decode() if isinstance(dev.name, bytes) else dev.name} (cc {dev.compute_capability})"
 
 
+def automaton_models() -> dict:
+    """name -> (automaton, scheme, keywords of simulate_automaton) of the models of issue 22, item 2."""
+    from models import ForcedDuffingImpact, ImpactOscillator, Newton
+    from models.automata import impact_pair, vibrating_table
+    from models.excitation import ou_filter
+
+    duffing = DuffingImpact(restitution=Ma(vc=0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0)
+    stop = ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None), restitution=Newton(0.8),
+                            name="linear")
+    forced = ForcedDuffingImpact(A=0.3, Omega=1.2)
+    h = {"H": (0.0, 4.0, 400)}
+    return {
+        "Example 1": (duffing.to_automaton(), "symplectic", dict(x0=(0.0, 0.0), histograms=h)),
+        "stop at the equilibrium": (stop.to_automaton(), "splitting", dict(x0=(0.5, 0.0), histograms=h)),
+        "impact pair": (impact_pair(), "splitting",
+                        dict(x0=(0.0,) * 4, histograms={"H": (0.0, 0.5, 100), "z": (-0.2, 0.2, 40)})),
+        "vibrating table": (vibrating_table(D=0.02, A=0.1), "splitting",
+                            dict(x0=(0.3, 0.0), histograms={"height": (0.0, 1.0, 100), "H": (0.0, 2.0, 100)})),
+        "forced, 8 phases": (forced.to_automaton(), "symplectic",
+                             dict(x0=(0.0, 0.0), histograms=h, phases=8, period=forced.forcing_period)),
+        "OU-filtered": (ou_filter(duffing, alpha=4.0), "splitting", dict(x0=(0.0,) * 4, histograms=h)),
+    }
+
+
+def automata(a) -> dict:
+    """Path-steps/s of the automaton kernel per model: CPU threads and the GPU in the same run; registers."""
+    from hybrid.stochastic import _auto_cuda, simulate_automaton
+
+    try:
+        _auto_cuda.require_cuda()
+    except CudaUnavailableError as exc:
+        print(f"gpu_throughput --automata: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    import numba
+
+    sim = _auto_cuda.simulator_enabled()
+    paths = a.paths or (32 if sim else 2**16 if a.quick else 2**20)
+    steps = a.steps or (100 if sim else 2000 if a.quick else 20_000)
+    cpu_paths = a.cpu_paths or (32 if sim else 64 if a.quick else 1024)
+    cpu_steps = a.cpu_steps or (100 if sim else 2000 if a.quick else 20_000)
+    tpb = int(a.threads_per_block.split(",")[0])
+    out = {"device": describe_device(), "dt": DT, "cpu_threads": numba.get_num_threads(), "models": {}}
+    print(f"device: {out['device']}; CPU: {numba.get_num_threads()} threads; dt = {DT}")
+
+    def ens(automaton, scheme, kw, n_paths, n_steps, **extra):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return simulate_automaton(automaton, scheme, dt=DT, paths=n_paths, t_end=n_steps * DT, t_burn=0.0, seed=1,
+                                      check_dt=False, **kw, **extra)
+
+    for name, (automaton, scheme, kw) in automaton_models().items():
+        if kw.get("phases"):  # at least one period
+            n_min = math.ceil(kw["period"] / DT) + 1
+            c_steps, g_steps = max(cpu_steps, n_min), max(steps, n_min)
+        else:
+            c_steps, g_steps = cpu_steps, steps
+        ens(automaton, scheme, kw, 8, min(c_steps, 100) if not kw.get("phases") else c_steps)  # compile or load
+        cpu = ens(automaton, scheme, kw, cpu_paths, c_steps)
+        cpu_rate = cpu_paths * c_steps / cpu.wall_time
+        ens(automaton, scheme, kw, tpb, 10 if not kw.get("phases") else g_steps, scheduler="cuda",
+            threads_per_block=tpb)  # compile
+        gpu = ens(automaton, scheme, kw, paths, g_steps, scheduler="cuda", threads_per_block=tpb)
+        gpu_rate = paths * g_steps / gpu.settings["device_seconds"]
+        row = {"scheme": scheme, "cpu_paths": cpu_paths, "cpu_steps": c_steps, "cpu_path_steps_per_s": cpu_rate,
+               "gpu_paths": paths, "gpu_steps": g_steps, "gpu_path_steps_per_s": gpu_rate,
+               "ratio_gpu_to_cpu": gpu_rate / cpu_rate, "threads_per_block": tpb}
+        first = gpu.names[0]
+        line = (f"{name:<24} {scheme:<10} CPU {cpu_rate:9.3g}  GPU {gpu_rate:9.3g} path-steps/s  ratio "
+                f"{gpu_rate / cpu_rate:8.3g}   E[{first}] GPU {gpu.mean(first)} CPU {cpu.mean(first)}")
+        if not sim:
+            res = _auto_cuda.kernel_resources(gpu.settings)
+            row.update(res)
+            line += (f"   {res['registers_per_thread']} registers/thread, local {res['local_bytes_per_thread']} B, "
+                     f"shared {res['shared_bytes_per_block']} B/block, occupancy {res['occupancy']:.0%}")
+        print(line, flush=True)
+        out["models"][name] = row
+    if sim:
+        print("(simulator: the GPU figures above measure Python, not a GPU; no registers without a GPU)")
+    return out
+
+
+def registers(a) -> dict:
+    """Registers per thread of each model's automaton kernel for sm_90 from its PTX (``ptxas -v``), without a GPU.
+
+    Needs numba-cuda, NVVM and NVRTC (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels, their
+    library folders on LD_LIBRARY_PATH) and ``ptxas`` (on PATH, or the one in the nvcc wheel).
+    """
+    import re
+    import shutil
+    import subprocess
+    import tempfile
+
+    from hybrid.stochastic import _auto_cuda
+
+    ptxas = shutil.which("ptxas")
+    if ptxas is None:
+        import nvidia.cuda_nvcc as wheel  # noqa: F401  (the nvidia-cuda-nvcc-cu12 wheel ships ptxas)
+
+        ptxas = str(Path(list(wheel.__path__)[0]) / "bin" / "ptxas")
+    out = {}
+    for name, (automaton, scheme, kw) in automaton_models().items():
+        obs = dict(automaton.observables) if "observables" not in kw else kw["observables"]
+        obs = {k: v for k, v in obs.items() if k in kw["histograms"]}
+        width = max(b for _, _, b in kw["histograms"].values()) + 2
+        for prec in ("f64", "f32") if name == "Example 1" else ("f64",):
+            t0 = time.perf_counter()
+            ptx = _auto_cuda.compile_ptx(automaton, scheme, obs, histograms_width=width, phases=kw.get("phases", 0),
+                                         precision=prec)
+            with tempfile.TemporaryDirectory() as tmp:
+                path = Path(tmp) / "k.ptx"
+                path.write_text(ptx)
+                r = subprocess.run([ptxas, "-arch=sm_90", "-v", str(path), "-o", str(Path(tmp) / "k.cubin")],
+                                   capture_output=True, text=True)
+            info = r.stderr
+            regs = re.search(r"Used (\d+) registers", info)
+            stack = re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads", info)
+            row = {"registers": int(regs.group(1)) if regs else None,
+                   "stack_bytes": int(stack.group(1)) if stack else None,
+                   "spill_stores": int(stack.group(2)) if stack else None, "compile_s": time.perf_counter() - t0}
+            out[f"{name} {prec}"] = row
+            print(f"{name:<24} {scheme:<10} {prec}: {row['registers']} registers/thread, stack {row['stack_bytes']} "
+                  f"B, spill stores {row['spill_stores']} B (sm_90, ptxas; PTX compile {row['compile_s']:.0f} s)",
+                  flush=True)
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--automata", action="store_true",
+                    help="the automaton kernel on the models of issue 22 (CPU and GPU per model, registers)")
+    ap.add_argument("--registers", action="store_true",
+                    help="registers per thread of the automaton kernels for sm_90 from PTX (ptxas -v; no GPU needed)")
     ap.add_argument("--quick", action="store_true", help="small sizes (seconds)")
     ap.add_argument("--scheme", default="milstein", choices=["milstein", "splitting", "em", "naive"])
     ap.add_argument("--paths", type=int, help="GPU paths (default 2**20; --quick 2**16, simulator 64)")
@@ -69,6 +210,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--no-f32", action="store_true", help="skip the single-precision run")
     ap.add_argument("--json", type=Path, help="write the figures to this file")
     a = ap.parse_args(argv)
+    if a.automata:
+        return _finish(automata(a), a)
+    if a.registers:
+        return _finish(registers(a), a)
     import numba
 
     out = {"scheme": a.scheme, "dt": DT, "model": "Example 1, delta=1, Ma V_C=0.4",

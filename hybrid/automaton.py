@@ -31,6 +31,37 @@ def real_symbol(name: str) -> sp.Symbol:
     return sp.Symbol(name, real=True)
 
 
+NUMPY_FUNCTIONS = frozenset({
+    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh",
+    "exp", "log", "Abs", "sign", "Min", "Max", "Piecewise", "Heaviside", "floor", "ceiling", "re", "im",
+})
+"""sympy functions that numpy evaluates alone (lambdify's numpy printer); any other (erf, gamma, Bessel ...) needs
+scipy.special."""
+
+
+def lambdify_numeric(args, expr, **kwargs):
+    """``sympy.lambdify`` for arrays: numpy alone where it suffices, scipy (its special functions) only where needed.
+
+    Start-up matters on the command line: lambdify's ``"numpy"`` runs ``from numpy import *``, which loads numpy's
+    lazy submodules (f2py, testing, random, ma: about 0.1 s), and ``"scipy"`` imports scipy.special (0.1-0.2 s).
+    Passing the numpy module itself prints the same code without either. ``kwargs`` go to ``sympy.lambdify``.
+
+    Examples
+    --------
+    >>> x = real_symbol("x")
+    >>> float(lambdify_numeric([x], sp.sin(x) + x**3)(1.0)) == float(sp.sin(1) + 1)
+    True
+    >>> round(float(lambdify_numeric([x], sp.erf(x))(1.0)), 6)
+    0.842701
+    """
+    import numpy as np
+
+    exprs = expr if isinstance(expr, (list, tuple)) else [expr]
+    names = {type(f).__name__ for e in exprs for f in sp.sympify(e).atoms(sp.Function)}
+    modules = [np] if names <= NUMPY_FUNCTIONS else ["scipy", "numpy"]
+    return sp.lambdify(args, expr, modules=modules, **kwargs)
+
+
 def canonical(expr: sp.Expr) -> sp.Expr:
     """Replace every free symbol by the real symbol of the same name, so that symbols compare by name."""
     return expr.xreplace({s: real_symbol(s.name) for s in expr.free_symbols if isinstance(s, sp.Symbol)})

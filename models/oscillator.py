@@ -20,9 +20,8 @@ from types import MappingProxyType
 
 import numpy as np
 import sympy as sp
-from scipy import integrate
 
-from hybrid.automaton import HybridAutomaton, Mode, Transition, _as_expr, real_symbol
+from hybrid.automaton import HybridAutomaton, Mode, Transition, _as_expr, lambdify_numeric, real_symbol
 from hybrid.errors import ModelError, ParameterError
 
 from .levels import solve_level
@@ -231,7 +230,7 @@ class ImpactOscillator:
         if cached is None:
             names = sorted(self.params)
             checked = [(what, e) for what, e in exprs if e.free_symbols <= {X, Y, *map(real_symbol, names)}]
-            fns = [(what, e, sp.lambdify([X, Y, *[real_symbol(k) for k in names]], e, ["scipy", "numpy"]))
+            fns = [(what, e, lambdify_numeric([X, Y, *[real_symbol(k) for k in names]], e))
                    for what, e in checked]
             cached = self.__dict__["_hf_of_parameters"] = (names, fns)
         names, fns = cached
@@ -261,7 +260,7 @@ class ImpactOscillator:
         cached = self.__dict__.get("_g_of_parameters")
         if cached is None:
             names = sorted(self.params)
-            fn = sp.lambdify([X, *[real_symbol(k) for k in names]], self.g, ["scipy", "numpy"])
+            fn = lambdify_numeric([X, *[real_symbol(k) for k in names]], self.g)
             cached = self.__dict__["_g_of_parameters"] = (names, fn)
         return cached
 
@@ -423,6 +422,8 @@ class ImpactOscillator:
     @cached_property
     def potential_expr(self) -> sp.Expr | None:
         """G(x) = int_0^x g, symbolic with parameter symbols; None when sympy cannot integrate g."""
+        if self.g.is_polynomial(X):  # the usual case; sp.integrate's general machinery costs 0.05-0.1 s
+            return sp.expand(sp.Poly(self.g, X).integrate().as_expr())
         s = sp.Dummy("s", real=True)
         G = sp.integrate(self.g.xreplace({X: s}), (s, 0, X))
         if G.has(sp.Integral):
@@ -437,17 +438,24 @@ class ImpactOscillator:
 
     @cached_property
     def _g_numeric(self):
-        return sp.lambdify(X, self.substitute(self.g), ["scipy", "numpy"])
+        return lambdify_numeric(X, self.substitute(self.g))
+
+    @cached_property
+    def _damping_numeric(self):
+        """epsilon h(x, y) at the current parameters, a numpy function of (x, y) (lambdified once per model)."""
+        return lambdify_numeric((X, Y), self.substitute(self.epsilon * self.h))
 
     @cached_property
     def _G_numeric(self):
         G = self.potential_expr
         if G is not None:
-            fn = sp.lambdify(X, self.substitute(G), ["scipy", "numpy"])  # erf, gamma, ... on arrays
+            fn = lambdify_numeric(X, self.substitute(G))  # erf, gamma, ... on arrays
             return lambda x: np.broadcast_to(np.asarray(fn(x), dtype=float), np.shape(x)) + 0.0
         g = self._g_numeric
 
         def by_quadrature(x):
+            from scipy import integrate  # here only: scipy.integrate costs 0.2-0.4 s of start-up
+
             x = np.asarray(x, dtype=float)
             flat = [integrate.quad(lambda s: float(g(s)), 0.0, xi, epsabs=1e-14, epsrel=1e-13)[0] for xi in x.ravel()]
             return np.array(flat).reshape(x.shape)
@@ -735,4 +743,5 @@ class ImpactOscillator:
         return f"{type(self).__name__}({params}, restitution={self.restitution!r})"
 
 
-_CACHED = {"potential_expr", "energy_expr", "_g_numeric", "_G_numeric", "ito_drift", "diffusion_squared"}
+_CACHED = {"potential_expr", "energy_expr", "_g_numeric", "_G_numeric", "_damping_numeric", "ito_drift",
+           "diffusion_squared"}

@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import sympy as sp
 
-from hybrid.automaton import _as_expr, real_symbol
+from hybrid.automaton import _as_expr, lambdify_numeric, real_symbol
 from hybrid.errors import ParameterError, RestitutionError
 
 SPEED = real_symbol("v")
@@ -72,7 +72,7 @@ class RestitutionLaw:
     def _numpy(self) -> Callable:
         cached = getattr(self, "_fn", None)
         if cached is None:
-            cached = sp.lambdify(SPEED, self.expression(SPEED), modules="numpy")
+            cached = lambdify_numeric(SPEED, self.expression(SPEED))
             self._fn = cached
         return cached
 

@@ -74,3 +74,17 @@ def test_cli_help_imports_no_heavy_library(argv):
             f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
+
+
+def test_solve_by_fpk_imports_only_what_it_uses(tmp_path):
+    # start-up is most of `vibro solve`'s cost (issue 23): the fpk path needs sympy, numpy and scipy.sparse, not
+    # pandas (the CSV is written by csv_text), scipy.interpolate/optimize/special/integrate or the engines
+    unused = ("pandas", "scipy.integrate", "scipy.interpolate", "scipy.optimize", "scipy.special", "matplotlib",
+              "numba", "heyoka", "dask")
+    out = tmp_path / "p.csv"
+    argv = ["solve", "--method", "fpk", "--tol", "0.05", "--no-progress", "--out", str(out)]
+    code = (f"import sys; from vibro.cli import main\ntry:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
+            f"print(sorted(m for m in {unused!r} if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.read_text().startswith("H,p\n")
+    assert res.stdout.strip().splitlines()[-1] == "[]"

@@ -1,9 +1,8 @@
 """ImpactOscillator as a front end of the automaton kernel, and the automaton kernel's symplectic and BAOAB schemes.
 
-- ``simulate_ensemble(..., "milstein")`` and ``(..., "splitting")`` run on the kernel generated from
-  ``model.to_automaton()`` (its ``symplectic`` and ``baoab`` schemes) and give the oscillator kernel's numbers: the
-  same histograms bin for bin, the same impact counts and means, on symmetric, one-sided and equilibrium walls and
-  with the Newton and Ma laws.
+- ``simulate_ensemble`` runs every scheme on the kernel generated from ``model.to_automaton()``
+  (``milstein`` as its ``symplectic``, ``splitting`` as its ``baoab``, ``em``, ``naive``); ``kernel="oscillator"``
+  (the oscillator's own kernel, removed) is refused in one line.
 - The symplectic scheme keeps the Gibbs density of an impact pair with elastic impacts (the n-DOF oracle) and,
   unlike the explicit em, does not pump energy into a lightly damped oscillator.
 - Transition checks (the restitution coefficient in (0, 1]) are counted and reported; observables given no
@@ -21,51 +20,9 @@ import sympy as sp
 from hybrid import HybridAutomaton, Mode, Transition
 from hybrid.errors import ParameterError, VibroWarning
 from hybrid.stochastic import AUTOMATON_SCHEMES, simulate_automaton, simulate_ensemble
-from models import DuffingImpact, ImpactOscillator, Ma, Newton
-
-TOTALS = ("samples", "below", "impacts_left", "impacts_right", "h_over", "xy_out", "v_over", "violations",
-          "stuck", "nonfinite", "h_under", "v_under", "bad_e")
-
+from models import DuffingImpact, Newton
 
 SLOW = pytest.mark.slow  # about 12 s each (two cold kernel compiles)
-
-
-MODELS = {
-    "ma-symmetric": DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0),
-    "newton-symmetric": DuffingImpact(restitution=Newton(0.7), a=1.0, b=0.2, c=0.05, D=0.05, delta=0.8),
-    "equilibrium-stop": ImpactOscillator("x", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(0, None),
-                                         restitution=Newton(0.8)),
-    "one-sided": ImpactOscillator("x + 0.2*x**3", "c*y", parameters={"c": 0.05, "D": 0.05}, barriers=(None, 0.7),
-                                  restitution=Ma(0.2)),
-    # G(x) has erf in it (it used to fail on arrays before any kernel ran)
-    "erf-potential": ImpactOscillator("x + exp(-x**2)*x**2", "c*y", parameters={"c": 0.05, "D": 0.05, "delta": 0.9},
-                                      restitution=Newton(0.8)),
-}
-# the default suite: milstein on three geometries, splitting on one; every pair with -m slow
-DEFAULT_PAIRS = {("milstein", "ma-symmetric"), ("milstein", "equilibrium-stop"), ("milstein", "erf-potential"),
-                 ("splitting", "ma-symmetric")}
-
-
-@pytest.mark.parametrize("scheme, name", [
-    pytest.param(scheme, name, marks=() if (scheme, name) in DEFAULT_PAIRS else SLOW, id=f"{scheme}-{name}")
-    for scheme in ("milstein", "splitting") for name in MODELS])
-def test_oscillator_schemes_run_on_the_automaton_kernel_with_the_oscillator_kernels_numbers(scheme, name):
-    # milstein runs as the automaton's symplectic scheme, splitting (BAOAB) as its baoab scheme
-    model = MODELS[name]
-    kw = dict(dt=2e-3 if scheme == "milstein" else 0.02, paths=16, t_end=200.0, t_burn=20.0, seed=3, chunk_paths=8,
-              bins=80, v_bins=50)
-    new = simulate_ensemble(model, scheme, **kw)
-    old = simulate_ensemble(model, scheme, kernel="oscillator", **kw)
-    assert new.settings["kernel"] == "automaton" and old.settings["kernel"] == "oscillator"
-    assert new.impacts > 50  # the walls are hit: the reset is compared, not only the flight
-    # the same normals in the same order and the same step: identical paths up to rounding, so identical bins
-    np.testing.assert_array_equal(new.h_counts, old.h_counts)
-    np.testing.assert_array_equal(new.xy_counts, old.xy_counts)
-    np.testing.assert_array_equal(new.v_counts, old.v_counts)
-    assert {k: new.total(k) for k in TOTALS} == {k: old.total(k) for k in TOTALS}
-    for a, b in ((new.mean_energy, old.mean_energy), (new.mean_x2, old.mean_x2),
-                 (new.mean_impact_speed, old.mean_impact_speed)):
-        assert a.value == pytest.approx(b.value, rel=1e-12) and a.ci == pytest.approx(b.ci, rel=1e-9)
 
 
 def test_kernel_choice_is_checked_and_reported():
@@ -73,17 +30,12 @@ def test_kernel_choice_is_checked_and_reported():
     kw = dict(dt=0.01, paths=2, t_end=2.0, t_burn=0.0, xy_bins=None)
     with pytest.raises(ParameterError, match="kernel="):
         simulate_ensemble(m, "milstein", kernel="fast", **kw)
-    with pytest.raises(ParameterError, match="scheme 'em'"):
-        simulate_ensemble(m, "em", kernel="automaton", **kw)
+    with pytest.raises(ParameterError, match="is gone"):
+        simulate_ensemble(m, "milstein", kernel="oscillator", **kw)
     with pytest.raises(ParameterError, match="CPU kernel"):
         simulate_ensemble(m, "milstein", kernel="automaton", scheduler="cuda", **kw)
     with pytest.warns(VibroWarning):  # two chunks only: the CI warning
-        assert simulate_ensemble(m, "em", **kw).settings["kernel"] == "oscillator"
-    from models import CustomRestitution
-
-    law = CustomRestitution(lambda v: 0.8)  # a callable law has no symbolic reset: the oscillator kernel runs it
-    with pytest.warns(VibroWarning):
-        assert simulate_ensemble(DuffingImpact(restitution=law), "milstein", **kw).settings["kernel"] == "oscillator"
+        assert simulate_ensemble(m, "em", **kw).settings["kernel"] == "automaton"
 
 
 X, Y = sp.symbols("x y")
@@ -104,7 +56,7 @@ def test_a_failed_transition_check_is_counted_and_reported():
     assert simulate_automaton(base, "symplectic", **kw).flags["bad_reset"] == 0
 
 
-@SLOW  # two kernels; the front end's summed observables are compared with the oscillator kernel's sums above
+@SLOW  # two kernels
 def test_summed_observables_have_means_but_no_histogram():
     a = DuffingImpact().to_automaton()
     kw = dict(dt=5e-3, paths=16, t_end=60.0, t_burn=5.0, x0=(0.0, 0.0), seed=2, chunk_paths=2)
@@ -118,7 +70,7 @@ def test_summed_observables_have_means_but_no_histogram():
         summed.density("x2")
 
 
-@SLOW  # two kernels; the default suite checks symplectic against the oscillator kernel and the Gibbs marginal
+@SLOW  # two kernels; the default suite checks symplectic against the Gibbs marginal
 def test_symplectic_scheme_does_not_pump_energy_where_explicit_em_does():
     # x'' + c x' + x = sqrt(2D) xi without walls: E[H] = D / c exactly. Explicit EM adds energy at a rate of about
     # dt * omega**2 per unit time against the damping's c: a relative bias of order dt / c = 0.4 here.

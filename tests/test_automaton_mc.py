@@ -270,6 +270,7 @@ def test_inelastic_chattering_on_the_step_scale_is_reported():
                            check_dt=False)
 
 
+@pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
 @pytest.mark.parametrize("script", ["06_equilibrium_stop.py", "07_impact_pair.py"])
 def test_examples_06_07_run_headless_and_pass_their_checks(script):
     from examples_run import run_example

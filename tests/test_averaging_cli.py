@@ -72,6 +72,7 @@ def test_vibro_pdf_bad_input_exits_2_with_one_line(tmp_path, capsys, argv, messa
     assert not (tmp_path / "p.csv").exists()
 
 
+@pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
 @pytest.mark.parametrize("script", ["01_quickstart.py", "04_user_model.py"])
 def test_examples_run_headless_and_pass_their_self_checks(script):
     env = dict(os.environ, MPLBACKEND="Agg")

@@ -158,7 +158,6 @@ BAD = [
     (["--model", "impact_pair", "--param", "gap"], "must read NAME=VALUE"),
     (["--model", "impact_pair", "--restitution", "newton:e=0.5"], "--restitution applies to oscillator models"),
     (["--model", "impact_pair", "--x0", "0", "0"], "--x0 gives 2 values for the 4 states"),
-    (["--model", "impact_pair", "--scheme", "naive"], "unknown scheme 'naive'"),
     (["--model", "duffing", "--filter", "ou", "--param", "alpha=0"], "alpha=0.0 must be a positive finite"),
     (["--model", "duffing", "--filter", "ou", "--param", "alpha=nan"], "alpha=nan must be a positive finite"),
     (["--model", "duffing", "--filter", "bandpass", "--param", "zeta=-1"], "zeta=-1.0 must be a positive"),

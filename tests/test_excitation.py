@@ -256,6 +256,7 @@ def test_a_negative_bandwidth_is_refused_by_the_engine_before_it_runs():
                            params={"alpha": -1.0}, histograms={})
 
 
+@pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
 def test_example_10_runs_headless_and_passes_its_checks():
     from examples_run import run_example
 

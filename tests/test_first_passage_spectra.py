@@ -223,7 +223,7 @@ def test_monte_carlo_first_passage_with_the_exit_as_a_guard():
     assert mc.details["censored"] == 0 and np.all(mc.R_lo <= mc.R) and np.all(mc.R <= mc.R_hi)
 
 
-@pytest.mark.slow  # a few seconds each
+@pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
 @pytest.mark.parametrize("script", ["11_first_passage.py", "12_spectrum.py"])
 def test_examples_run(script):
     from examples_run import run_example

@@ -253,6 +253,7 @@ def test_forced_averaging_on_an_unrated_model_warns():
             solve(unrated, method="jump")
 
 
+@pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
 def test_example_09_runs_headless_and_passes_its_checks():
     from examples_run import run_example
 

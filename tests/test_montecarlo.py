@@ -20,7 +20,7 @@ import pytest
 from problems import elastic_duffing
 from scipy import stats as st
 
-from hybrid.errors import ModelError, ParameterError, RestitutionError, StepSizeError
+from hybrid.errors import ModelError, ParameterError, RestitutionError, StepSizeError, VibroWarning
 from hybrid.stochastic import (
     SCHEMES,
     EnsembleStatistics,
@@ -35,6 +35,7 @@ from hybrid.stochastic import (
     simulate_ensemble,
     ziggurat_tables,
 )
+from hybrid.stochastic._statistics import SUMS
 from models import CustomRestitution, DuffingImpact, Elastic, ImpactOscillator, Ma, Newton, RayleighImpact
 from vibro.cli import main as vibro
 
@@ -110,7 +111,7 @@ def test_second_process_loads_the_kernel_from_the_disk_cache():
         "from models import DuffingImpact, Elastic\n"
         "from hybrid.stochastic import build_kernel, SCHEMES\n"
         "k = build_kernel(DuffingImpact(restitution=Elastic()), SCHEMES['splitting'])\n"
-        "st = k.run_chunks.stats\n"
+        "st = k.run_chunk.stats\n"
         "print(sum(st.cache_hits.values()), sum(st.cache_misses.values()))\n"
     )
     build_kernel(DuffingImpact(restitution=Elastic()), SCHEMES["splitting"])  # make sure it is cached
@@ -149,6 +150,9 @@ def test_two_callable_laws_get_their_own_kernels():
     m = DuffingImpact(D=0.0, c=0.0)
     h_half, h_most = (float(m.energy(*end[0])) for end in ends)
     assert h_most > h_half
+    # the callable is the reset's coefficient, as the expression law's number is: the same paths to the bit
+    newton = drive_paths(DuffingImpact(D=0.0, c=0.0, restitution=Newton(0.5)), "splitting", 0.01, z, x0=(0.0, 2.0))
+    np.testing.assert_array_equal(ends[0], newton)
 
 
 def test_splitting_refuses_nonlinear_damping_and_unknown_scheme():
@@ -189,6 +193,48 @@ def test_sampled_paths_follow_the_free_flight_in_a_box():
     for k, tk in enumerate(t):
         xe, ve = _box_oracle(0.1, 1.7, tk, 0.5, 0.9)
         assert x[0, k] == pytest.approx(xe, abs=1e-12) and y[1, k] == pytest.approx(ve, rel=1e-12)
+
+
+def test_sampled_paths_are_the_paths_of_the_ensemble():
+    # sample_paths stores the paths that simulate_ensemble summarises (one kernel, the same streams and draws): the
+    # per-chunk sums of x**2 over the sampled states, added in the kernel's order, equal the ensemble's to the bit
+    m = DuffingImpact(restitution=Newton(0.9), delta=0.8)
+    kw = dict(dt=0.02, paths=12, t_end=40.0, seed=7, chunk_paths=8)
+    with pytest.warns(VibroWarning, match="chunks"):  # two chunks: the CI warning
+        s = simulate_ensemble(m, "splitting", t_burn=10.0, xy_bins=None, **kw)
+    t, x, y = sample_paths(m, "splitting", every=1, **kw)
+    assert s.impacts > 20 and t[-1] == pytest.approx(40.0)
+    n_burn, n_samp = s.settings["n_burn"], s.settings["n_samp"]
+    window = slice(n_burn + 1, n_burn + n_samp + 1)  # the states after each sampled step
+    for k in range(2):
+        rows = slice(8 * k, 8 * k + 8)
+        for name, values in (("x2", x[rows, window]), ("y2", y[rows, window])):
+            total = 0.0
+            for j in range(values.shape[1]):  # steps outside, lanes inside, as the kernel adds them
+                for v in values[:, j]:
+                    total += v * v
+            assert total == s.chunk_sums[k, SUMS.index(name)], name
+        # H in numpy's order of operations, not the kernel's: equal to rounding
+        h = m.energy(x[rows, window], y[rows, window])
+        assert float(np.sum(h)) == pytest.approx(s.chunk_sums[k, SUMS.index("H")], rel=1e-12)
+    assert s.total("samples") == x[:, window].size
+
+
+def _naive_box(x, v, dt, steps, delta, e):
+    """The naive rule in a box |x| <= delta without forces (plain Python): x += v dt; beyond a wall, x on the wall
+    and v -> -e v; the rest of the step is lost."""
+    for _ in range(steps):
+        x += v * dt
+        if abs(x) > delta:
+            x, v = math.copysign(delta, x), -e * v
+    return x, v
+
+
+def test_naive_scheme_puts_the_path_on_the_wall_and_drops_the_rest_of_the_step():
+    model = DuffingImpact(restitution=Newton(0.8), a=0.0, b=0.0, c=0.0, D=0.0, delta=0.1)
+    out = drive_paths(model, "naive", 0.05, np.zeros((1, 7)), x0=(0.03, 3.0))
+    x, v = _naive_box(0.03, 3.0, 0.05, 7, 0.1, 0.8)
+    assert out[0, 0] == pytest.approx(x, abs=1e-12) and out[0, 1] == pytest.approx(v, rel=1e-12)
 
 
 def test_barriers_never_violated_over_1e8_path_steps():

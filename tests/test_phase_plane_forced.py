@@ -1,9 +1,10 @@
 """The forced phase-plane solver (``fpk`` for a periodically forced model) against closed forms and exact limits.
 
 Oracles: the linear oscillator without walls under harmonic plus white forcing (every section is Gaussian, mean =
-the periodic response, variance = D / (c w0**2)); the unforced limit with elastic walls (the Gibbs density, and the
-autonomous solver's own answer); the half-period symmetry of a symmetric model. The comparison with Monte Carlo is
-``benchmarks/fpk_forced.py`` (and the slow test at the end).
+the periodic response, variance = D / (c w0**2); p(H | t) is then a scaled noncentral chi-square with 2 degrees of
+freedom); the unforced limit with elastic walls (the Gibbs density, and the autonomous solver's own answer); the
+half-period symmetry of a symmetric model. The comparison with Monte Carlo is ``benchmarks/fpk_forced.py`` (and the
+slow test at the end).
 """
 
 from __future__ import annotations
@@ -12,101 +13,113 @@ import numpy as np
 import pandas as pd
 import pytest
 from problems import elastic_duffing
+from scipy.stats import ncx2
 
-from averaging.phase_plane import solve_phase_plane
+from averaging.phase_plane import GridWarning
+from averaging.phase_plane.cartesian import moments, solve_cartesian
 from averaging.phase_plane.forced import periodic_density_xy, unforced
 from hybrid.errors import ModelError, NormalisationError, ParameterError
 from models import Elastic, ForcedDuffingImpact, ImpactOscillator, Newton
 from vibro.cli import main
 
+A_, C_, W_, D_ = 0.4, 0.5, 1.3, 0.05
+RESPONSE = A_ / (1.0 - W_**2 + 1j * C_ * W_)  # x_p(t) = Re(RESPONSE e^{i W t})
 
-def _linear(A=0.4, c=0.5, W=1.3, D=0.05):
+
+def _linear(A=A_, c=C_, W=W_, D=D_):
     return ImpactOscillator("w0**2*x", "c*y", forcing="A*cos(W*t)", barriers=None,
                             parameters={"c": c, "w0": 1.0, "W": W, "A": A, "D": D})
 
 
-def _section_errors(sol, A=0.4, c=0.5, W=1.3, D=0.05):
-    """Largest relative error of the section means (of x and y, relative to their amplitudes) and variances."""
-    z = A / (1.0 - W**2 + 1j * c * W)
-    var = D / c  # w0 = 1: Var x = D / (c w0**2) = Var y
+def _section_errors(sol):
+    """Largest relative error over 8 sections of the means of x and y (relative to their amplitudes) and of their
+    variances (D / c for both), the moments integrated from the piecewise-linear density on the cells."""
+    var = D_ / C_
     err_mean, err_var = 0.0, 0.0
     for t, s in zip(sol.phase_times(8), sol.sections(8)):
-        mx, my = s.cell_mass @ s.cell_x, s.cell_mass @ s.cell_y
-        err_mean = max(err_mean, abs(mx - (z * np.exp(1j * W * t)).real) / abs(z),
-                       abs(my - (1j * W * z * np.exp(1j * W * t)).real) / abs(W * z))
-        err_var = max(err_var, abs((s.cell_mass @ s.cell_x**2 - mx**2) / var - 1.0),
-                      abs((s.cell_mass @ s.cell_y**2 - my**2) / var - 1.0))
+        _h, ex2, ey2, mx, my = moments(s.grid, s.model.potential, s.cell_p)
+        err_mean = max(err_mean, abs(mx - (RESPONSE * np.exp(1j * W_ * t)).real) / abs(RESPONSE),
+                       abs(my - (1j * W_ * RESPONSE * np.exp(1j * W_ * t)).real) / abs(W_ * RESPONSE))
+        err_var = max(err_var, abs((ex2 - mx**2) / var - 1.0), abs((ey2 - my**2) / var - 1.0))
     return err_mean, err_var
 
 
 def test_linear_forced_sections_are_the_gaussian_of_the_periodic_response():
-    # Measured (benchmarks/fpk_forced.py): 3.1e-2 / 2.9e-2 at (60, 64) with 32 steps, 1.3e-2 / 8e-3 at (120, 128)
-    # with 64 steps; the goal of 1e-3 is not reached at these grids (the discretisation error of a density that
-    # moves across the rings, see docs/results/fpk-forced.md). The bounds hold the measured error with a margin of
-    # 1.3 and the refinement must reduce it.
-    coarse = periodic_density_xy(_linear(), grid=(40, 48), steps=16, h_max=3.0, phases=8)
-    fine = periodic_density_xy(_linear(), grid=(60, 64), steps=32, h_max=3.0, phases=8)
-    m_c, v_c = _section_errors(coarse)
-    m_f, v_f = _section_errors(fine)
-    assert m_f < 0.04 and v_f < 0.04
-    assert m_f < 0.6 * m_c and v_f < 0.6 * v_c
+    # Crank-Nicolson at K and 2K steps combined is fourth order in time: measured on (32, 32) cells, the largest
+    # relative error of the variances is 7.3e-3 with K = 16 and 4.5e-4 with K = 32 (a ratio of 16, as for fourth
+    # order; Crank-Nicolson alone with 64 steps: 7.8e-3); the means are within 3.4e-4 and 2.0e-5. The space error
+    # is far smaller (the unforced variance is within 4e-5 at (40, 40)). The bounds: the issue's 1e-3, which the
+    # measured errors meet with a margin of 2, and a ratio above 8 (at least third order).
+    sols = {k: periodic_density_xy(_linear(), grid=(32, 32), steps=k, h_max=3.0, phases=8, check=False)
+            for k in (16, 32)}
+    (_m16, v16), (m32, v32) = _section_errors(sols[16]), _section_errors(sols[32])
+    assert m32 < 1e-3 and v32 < 1e-3
+    assert v16 > 8.0 * v32  # at least third order in time: the extrapolation works
+    fine = sols[32]
     assert fine.conservation < 1e-12 and fine.periodicity < 1e-8
     assert fine.impact_rate == 0.0
+    assert fine.cells == "cartesian" and fine.time_correction > 0  # the size of the time extrapolation, reported
 
 
-def test_extrapolation_removes_the_leading_grid_error():
-    # E[H | t] of the linear oscillator is D/c + (x_p**2 + y_p**2) / 2 exactly. The Richardson combination of
-    # (60, 64) and (30, 32) removes the grid's leading error, not the time steps' (the same 32 for both): measured
-    # 3.1e-2 -> 2.7e-2 here, 1.35e-2 -> 1.09e-2 at (120, 128) with 64 steps; against Monte Carlo on example 08 it
-    # takes the L1 of p(H | t) from 0.024 to 0.009 (the slow test below)
-    A, c, W, D = 0.4, 0.5, 1.3, 0.05
-    z = A / (1.0 - W**2 + 1j * c * W)
-    sol = periodic_density_xy(_linear(), grid=(60, 64), steps=32, h_max=3.0, phases=8, extrapolate=True)
-    t = sol.phase_times(8)
-    exact = D / c + 0.5 * (np.real(z * np.exp(1j * W * t)) ** 2 + np.real(1j * W * z * np.exp(1j * W * t)) ** 2)
-    err = np.max(np.abs(sol.mean_energy_at(t) / exact - 1.0))
-    err_fine = np.max(np.abs(sol.fine.mean_energy_at(t) / exact - 1.0))
-    assert err < 0.9 * err_fine
-    section = sol.section(t[3])
-    fine, coarse = sol.fine.section(t[3]), sol.coarse.section(t[3])
-    edges = np.linspace(0.0, 3.0, 31)
-    assert np.allclose(section.bin_masses(edges), (4 * fine.bin_masses(edges) - coarse.bin_masses(edges)) / 3)
-    assert section.bin_masses([0.0, 3.0])[0] == pytest.approx(1.0, abs=1e-9)
-    assert section.mean_energy == pytest.approx(sol.mean_energy_at(t[3])[0], rel=1e-9)
+def test_the_error_estimate_bounds_the_error_of_p_H_against_the_closed_form():
+    # p(H | t) of the linear oscillator: 2 H c / D is noncentral chi-square (2 degrees of freedom, noncentrality
+    # |response|**2 c / D at t); the two-grid estimate must bound the true L1 of p(H | t) on 100 bins, and not by
+    # orders of magnitude (measured: L1 0.0115 at worst over 4 phases, estimate 0.057, on (24, 24) cells)
+    sol = periodic_density_xy(_linear(), grid=(24, 24), steps=16, h_max=3.0, phases=4, l1_tol=1.0)
+    edges = np.linspace(0.0, sol.grid.h_max, 101)
+    worst = 0.0
+    for t, s in zip(sol.phase_times(4), sol.sections(4)):
+        xp, yp = (RESPONSE * np.exp(1j * W_ * t)).real, (1j * W_ * RESPONSE * np.exp(1j * W_ * t)).real
+        exact = np.diff(ncx2.cdf(2.0 * edges * C_ / D_, 2, (xp**2 + yp**2) * C_ / D_))
+        worst = max(worst, float(np.abs(s.bin_masses(edges) - exact).sum()))
+    assert worst < sol.error_estimate < 30.0 * worst
+    with pytest.warns(GridWarning, match="too coarse"):
+        periodic_density_xy(_linear(), grid=(24, 24), steps=16, h_max=3.0, l1_tol=0.1 * sol.error_estimate)
 
 
 def test_without_forcing_the_sections_are_the_stationary_gibbs_density():
     # A = 0 keeps the model forced (its equations name t) but every section is the stationary density: with elastic
-    # walls the Gibbs density exp(-c H / D), which the autonomous solver reproduces to 2e-4 in L1 at this grid
+    # walls the Gibbs density exp(-c H / D). Measured L1 on 100 bins: 4.0e-4 at (24, 48), 2.0e-4 at (32, 64),
+    # 7e-5 at (48, 96) cells
     model, ex = elastic_duffing(delta=1.0, c=0.1, D=0.05)
     forced = ImpactOscillator("a*x + b*x**3", "c*y", forcing="A*cos(W*t)", restitution=Elastic(),
                               parameters={**model.params, "A": 0.0, "W": 1.2})
     h_max = 6.0
-    sol = periodic_density_xy(forced, grid=(120, 128), steps=8, h_max=h_max)
-    auto = solve_phase_plane(unforced(forced), grid=(120, 128), h_max=h_max)
-    assert sol.factors == 1
+    sol = periodic_density_xy(forced, grid=(32, 64), steps=8, h_max=h_max, check=False)
+    auto = solve_cartesian(unforced(forced), grid=(32, 64), h_max=h_max)
+    assert sol.factors == 2  # one step matrix for each of the two step counts
     assert np.max(np.abs(sol.cell_p - auto.cell_p)) < 1e-8 * np.max(auto.cell_p)
     edges = np.linspace(0.0, h_max, 101)
     cdf = np.array([ex.probability_below(h) for h in edges]) / ex.probability_below(h_max)
     for t in (0.0, 0.37 * sol.period):
-        assert np.abs(sol.section(t).bin_masses(edges) - np.diff(cdf)).sum() < 1e-3
+        assert np.abs(sol.section(t).bin_masses(edges) - np.diff(cdf)).sum() < 3e-4
     assert sol.impact_rate == pytest.approx(auto.impact_rate, rel=1e-8)
+    assert sol.conservation < 1e-12
 
 
 def test_symmetric_forced_impacts_repeat_every_half_period():
     # walls at +-1, odd restoring force and forcing cos: (x, y, t) -> (-x, -y, t + T/2) maps the problem onto itself,
-    # so E[H | t] and the impact rate have period T/2 (the grid and the steps keep that symmetry)
+    # so E[H | t] and the impact rate have period T/2 (the grid and the steps keep that symmetry: measured 1e-10)
     m = ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=0.02)
-    sol = periodic_density_xy(m, grid=(40, 48), steps=16, h_max=4.0)
+    sol = periodic_density_xy(m, grid=(24, 48), steps=16, h_max=4.0, check=False)
     half = len(sol.times) // 2
     assert np.allclose(sol.mean_energy_t[:half], sol.mean_energy_t[half:], rtol=1e-7)
-    assert np.allclose(sol.impact_rate_t[:half], sol.impact_rate_t[half:], rtol=1e-6)
+    assert np.allclose(sol.impact_rate_t[:half], sol.impact_rate_t[half:], rtol=1e-7)
     assert sol.conservation < 1e-12
     assert np.all(sol.impact_rate_t > 0) and sol.impact_rate_t.max() > 3 * sol.impact_rate_t.min()
     # between the stored steps: the spline passes through them and stays normalised
     t = 0.5 * (sol.times[3] + sol.times[4])
-    assert sol.section(t).ring_mass.sum() == pytest.approx(1.0, abs=1e-9)
+    assert sol.section(t).bin_masses([0.0, sol.grid.h_max])[0] == pytest.approx(1.0, abs=1e-9)
     assert sol.mean_energy_at(sol.times[5])[0] == pytest.approx(sol.mean_energy_t[5], rel=1e-12)
+
+
+def test_rings_remain_available():
+    # the energy-angle rings (cells="rings"): second order in space, and coarse here: E[H] measured 2.1 % below the
+    # closed form at (40, 48) (0.2150 against 0.2197; 0.2143 at (60, 64) with Crank-Nicolson alone, 32 steps)
+    sol = periodic_density_xy(_linear(), cells="rings", grid=(40, 48), steps=16, h_max=3.0, check=False)
+    assert sol.cells == "rings" and sol.conservation < 1e-12
+    exact = D_ / C_ + 0.25 * abs(RESPONSE) ** 2 * (1.0 + W_**2)
+    assert sol.mean_energy == pytest.approx(exact, rel=0.03)
 
 
 def test_refusals():
@@ -125,12 +138,12 @@ def test_refusals():
         periodic_density_xy(ForcedDuffingImpact(), grid=(40, 48), steps=8, h_max=1e-9)
 
 
-def test_a_huge_h_max_puts_the_rings_where_the_mass_is():
-    # h_max = 1e12 would put the whole density into the first ring; the rings are fitted to the energies the
+def test_a_huge_h_max_puts_the_cells_where_the_mass_is():
+    # h_max = 1e12 would put the whole density into the first cells; the cells are fitted to the energies the
     # unforced density reaches (doubled), and the answer is that of a moderate h_max
     m = ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=0.02)
-    huge = periodic_density_xy(m, grid=(40, 48), steps=16, h_max=1e12)
-    moderate = periodic_density_xy(m, grid=(40, 48), steps=16, h_max=huge.grid.h_max)
+    huge = periodic_density_xy(m, grid=(24, 48), steps=16, h_max=1e12, check=False)
+    moderate = periodic_density_xy(m, grid=(24, 48), steps=16, h_max=huge.grid.h_max, check=False)
     assert huge.grid.h_max < 100 and huge.mean.h_max == 1e12
     assert huge.mean_energy == pytest.approx(moderate.mean_energy, rel=1e-12)
 
@@ -165,9 +178,10 @@ def test_cli_phases_on_an_unforced_model_is_one_line(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_against_monte_carlo_phase_resolved():
-    # example 08's forced Duffing (D = 0.02) against the stored Monte Carlo (2 x 384 000 samples per phase; noise
-    # 0.003 in L1 on 40 bins): measured 0.024 mean over the 16 phases at the default grid (the goal is 0.005; see
-    # docs/results/fpk-forced.md); the bound guards that figure
+    # example 08's forced Duffing (D = 0.02) against the stored Monte Carlo (4 x 384 000 samples per phase; noise
+    # 0.0022 mean, 0.0027 max in L1 on 40 bins): measured 0.0031 mean and 0.0050 max over the 16 phases at the
+    # default grid (docs/results/fpk-forced.md). The bounds: the issue's goal 0.005 for the mean, and for the worst
+    # phase the measured figure plus the Monte Carlo noise of one phase
     import sys
     from pathlib import Path
 
@@ -177,9 +191,10 @@ def test_against_monte_carlo_phase_resolved():
     edges, ref, noise = fpk_forced.mc_reference("0.02")
     sol = periodic_density_xy(fpk_forced.duffing(0.02), phases=16)
     l1 = np.array([np.abs(s.bin_masses(edges) - r).sum() for s, r in zip(sol.sections(16), ref)])
-    assert noise.max() < 0.006
-    assert l1.mean() < 0.03 and l1.max() < 0.04
-    # Richardson with the grid twice coarser: measured 0.0090 mean, 0.0118 max
-    sol = periodic_density_xy(fpk_forced.duffing(0.02), phases=16, extrapolate=True)
-    l1 = np.array([np.abs(s.bin_masses(edges) - r).sum() for s, r in zip(sol.sections(16), ref)])
-    assert l1.mean() < 0.012 and l1.max() < 0.015
+    assert noise.max() < 0.003
+    assert l1.mean() < 0.005 and l1.max() < 0.005 + noise.max()
+    assert sol.error_estimate < 0.006  # measured 0.0045: the two-grid estimate is of the size of the error
+    # the time averages against the Monte Carlo's (E[H] 0.51474 +- 0.00010, 0.28547 impacts per unit time):
+    # measured 0.5148 and 0.2854
+    eh, eh_ci, rate = fpk_forced.mc_summary("0.02")
+    assert abs(sol.mean_energy - eh) < 0.001 and abs(sol.impact_rate / rate - 1.0) < 0.005

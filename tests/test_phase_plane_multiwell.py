@@ -137,3 +137,19 @@ def test_cli_pdf_fpk_double_well(tmp_path, capsys):
     text = out.read_text().splitlines()
     assert text[0] == "H,p" and len(text) == 201 and float(text[1].split(",")[0]) < -0.99
     assert "E[H] = -0.5" in capsys.readouterr().out
+
+
+def test_solve_rates_a_double_well_with_the_cartesian_fpk(capsys):
+    # solve used to plan Monte Carlo for every model with several wells; the Cartesian fpk carries its own estimate
+    from vibro.cli import main
+    from vibro.solve import solve
+
+    sol = solve(_duffing(), tol=0.005)
+    assert sol.method == "fpk" and sol.choice.settings["scheme"] == "cartesian"
+    assert sol.edges[0] == pytest.approx(-1.0, abs=1e-6) and sol.H[0] == pytest.approx(-1.0, abs=1e-6)
+    exact = np.diff([_energy_cdf(-1.0, h) for h in sol.edges])
+    true = float(np.abs(sol.masses - exact).sum())
+    assert true <= sol.estimated_error <= 0.005  # the two-grid estimate bounds the true error and meets tol
+    assert main(["solve", "--param", "a=-1", "--param", "b=0.25", "--param", "c=1", "--param", "D=0.5",
+                 "--param", "delta=inf", "--dry-run"]) == 0
+    assert "Cartesian cells" in capsys.readouterr().out

@@ -188,28 +188,21 @@ class CartesianDiscretisation:
         # the face average of y p is y_j <p> + (hy**2 / 12) d_y p: d_y p from the face values of the rows j +- 1
         add_flux(a, b, *_transverse(grid, I, J, I + 1, J, 0, 1, hy * hy * hy / 12.0 * np.ones(len(a)), hy))
 
-        # ---- y faces: Itô drift m p upwind-biased, -(1/2) d_y(sigma**2 p) central
+        # ---- y faces: Itô drift m p upwind-biased (its own matrix, so that a time-dependent forcing can replace
+        # it: operator_with_drift), -(1/2) d_y(sigma**2 p) central
         I, J = np.meshgrid(np.arange(grid.nx), np.arange(grid.ny - 1), indexing="ij")
         I, J = I.ravel(), J.ravel()
         a, b = grid.cell(I, J), grid.cell(I, J + 1)
         ok = (a >= 0) & (b >= 0)
         I, J, a, b = I[ok], J[ok], a[ok], b[ok]
         xf, yf = grid.xc[I], grid.y_faces[J + 1]
-        m = np.asarray(np.broadcast_to(coef.m(xf, yf), xf.shape), dtype=float) - coef.g(xf)
-        pos = m > 0
-        up, down = np.where(pos, a, b), np.where(pos, b, a)
-        far = np.where(pos, grid.cell(I, J - 1), grid.cell(I, J + 2))
-        far2 = np.where(pos, grid.cell(I, J - 2), grid.cell(I, J + 3))
-        down2 = np.where(pos, grid.cell(I, J + 2), grid.cell(I, J - 1))
-        fc, fv = _face_value(up, down, far, far2, down2)
-        add_flux(a, b, fc, [hx * m * w for w in fv])
-        # <m p> over the face = m <p> + (hx**2 / 12) (m_x d_x p + m_xx p / 2): m's variation along the face
+        self._y_faces = (I, J, a, b)
         dx = 1e-4 * max(hx, 1e-12)
-        m_r = np.asarray(np.broadcast_to(coef.m(xf + dx, yf), xf.shape), dtype=float) - coef.g(xf + dx)
-        m_l = np.asarray(np.broadcast_to(coef.m(xf - dx, yf), xf.shape), dtype=float) - coef.g(xf - dx)
-        m_x, m_xx = (m_r - m_l) / (2.0 * dx), (m_r - 2.0 * m + m_l) / (dx * dx)
-        add_flux(a, b, *_transverse(grid, I, J, I, J + 1, 1, 0, hx * hx * hx / 12.0 * m_x, hx))
-        add_flux(a, b, (a, b), (hx * hx * hx / 24.0 * m_xx * 0.5, hx * hx * hx / 24.0 * m_xx * 0.5))
+        self._drift_dx = dx
+        xs = np.concatenate([xf, xf + dx, xf - dx])
+        ys = np.concatenate([yf, yf, yf])
+        self._drift_xy = (xs, ys)
+        m_all = np.asarray(np.broadcast_to(coef.m(xs, ys), xs.shape), dtype=float) - coef.g(xs)
         # -(1/2) d_y(sigma**2 p): fourth-order face derivative where four cells are there, second order otherwise
         lo2, hi2 = grid.cell(I, J - 1), grid.cell(I, J + 2)
         four = (lo2 >= 0) & (hi2 >= 0)
@@ -278,11 +271,47 @@ class CartesianDiscretisation:
                 cols.extend([srcs[jj]])
                 vals.extend([-fcs[jj] * ws[jj] * W[use][jj, kk]])
             self.walls[side] = (J_in, c_in, (c_in, c1, c2), (w0, w1, w2), flux_coef)
-        flat = [np.atleast_1d(np.asarray(r)) for r in rows]
-        A = sps.csr_matrix((np.concatenate([np.atleast_1d(np.asarray(v, dtype=float)) for v in vals]),
-                            (np.concatenate(flat), np.concatenate([np.atleast_1d(np.asarray(c)) for c in cols]))),
-                           shape=(n, n))
-        self.A = A.tocsc()
+        self._fixed = _assemble(rows, cols, vals, n)
+        self.A = (self._fixed + self.drift_operator(m_all)).tocsc()
+
+    def drift_points(self):
+        """(x, y) where :meth:`drift_operator` needs the Itô drift m(x, y) of y (the coefficient m minus g):
+        the y faces, then the same faces shifted by +dx and -dx in x (for m's variation along the face)."""
+        return self._drift_xy
+
+    def drift_operator(self, m_all):
+        """The y-face convection of the drift ``m_all`` (minus g, at :meth:`drift_points`) as a CSR matrix: the part
+        of the operator that a time-dependent force changes (:meth:`operator_with_drift`)."""
+        grid = self.grid
+        hx = grid.hx
+        I, J, a, b = self._y_faces
+        m, m_r, m_l = np.split(np.asarray(m_all, dtype=float), 3)
+        rows, cols, vals = [], [], []
+
+        def add_flux(src, dst, fcols, fvals):
+            for c, v in zip(fcols, fvals):
+                rows.extend([src, dst])
+                cols.extend([c, c])
+                vals.extend([v, -v])
+
+        pos = m > 0
+        up, down = np.where(pos, a, b), np.where(pos, b, a)
+        far = np.where(pos, grid.cell(I, J - 1), grid.cell(I, J + 2))
+        far2 = np.where(pos, grid.cell(I, J - 2), grid.cell(I, J + 3))
+        down2 = np.where(pos, grid.cell(I, J + 2), grid.cell(I, J - 1))
+        fc, fv = _face_value(up, down, far, far2, down2)
+        add_flux(a, b, fc, [hx * m * w for w in fv])
+        # <m p> over the face = m <p> + (hx**2 / 12) (m_x d_x p + m_xx p / 2): m's variation along the face
+        dx = self._drift_dx
+        m_x, m_xx = (m_r - m_l) / (2.0 * dx), (m_r - 2.0 * m + m_l) / (dx * dx)
+        add_flux(a, b, *_transverse(grid, I, J, I, J + 1, 1, 0, hx * hx * hx / 12.0 * m_x, hx))
+        add_flux(a, b, (a, b), (hx * hx * hx / 24.0 * m_xx * 0.5, hx * hx * hx / 24.0 * m_xx * 0.5))
+        return _assemble(rows, cols, vals, grid.n)
+
+    def operator_with_drift(self, m_all):
+        """The operator (CSR) with the drift replaced by ``m_all`` at :meth:`drift_points` (a time-dependent force:
+        the x faces, the noise and the walls stay)."""
+        return (self._fixed + self.drift_operator(m_all)).tocsr()
 
     def wall_flux(self, p, side):
         """(speeds at the wall, flux per incoming cell) of ``side`` for the density p."""
@@ -291,6 +320,14 @@ class CartesianDiscretisation:
         v = np.abs(self.grid.yc[J_in])
         order = np.argsort(v)
         return v[order], (flux_coef * pf)[order]
+
+
+def _assemble(rows, cols, vals, n):
+    """CSR matrix from lists of (row, column, value) arrays (duplicates summed)."""
+    flat = [np.atleast_1d(np.asarray(r)) for r in rows]
+    return sps.csr_matrix((np.concatenate([np.atleast_1d(np.asarray(v, dtype=float)) for v in vals]),
+                           (np.concatenate(flat), np.concatenate([np.atleast_1d(np.asarray(c)) for c in cols]))),
+                          shape=(n, n))
 
 
 def critical_energies(potential, lo: float, hi: float, samples: int = 20001) -> np.ndarray:

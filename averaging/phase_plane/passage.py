@@ -29,6 +29,7 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 import sympy as sp
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ParameterError, VibroWarning
 from models import X, Y
 
@@ -91,7 +92,7 @@ class Domain:
             if not (np.isfinite(self.energy_level) and self.energy_level > 0):
                 raise ParameterError(f"domain {text!r}: the level H_c = {self.energy_level:g} must be positive")
         self._model = model
-        self._f = sp.lambdify((X, Y, H_SYMBOL), phi, "numpy")
+        self._f = lambdify_numeric((X, Y, H_SYMBOL), phi)
 
     def value(self, x, y):
         """phi(x, y): negative inside."""

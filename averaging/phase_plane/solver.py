@@ -6,9 +6,8 @@ import time
 import warnings
 
 import numpy as np
-import sympy as sp
-from scipy.interpolate import PchipInterpolator
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ModelError, NormalisationError, ParameterError
 from hybrid.sizes import check_size
 from models import X, Y
@@ -16,6 +15,7 @@ from models import X, Y
 from ..stationary import check_energy_range, output_grid
 from ._core import Coefficients, Discretisation
 from ._grid import RingGrid
+from ._monotone import MonotoneCubic
 
 DEFAULT_GRID = (160, 192)
 """(rings in H, angles per ring): L1 discretisation error of p(H) below 1e-3 on the paper's cases."""
@@ -96,7 +96,7 @@ class PhaseDensity:
         scale = float(np.max(abs(disc.A) @ np.abs(p)))
         self.residual = float(np.max(np.abs(Ap)) / scale) if scale > 0 else 0.0
         self.conservation = float(np.max(np.abs(np.asarray(disc.A.sum(axis=0)))))
-        self._cdf = PchipInterpolator(grid.H_faces, np.concatenate([[0.0], np.cumsum(self.ring_mass)]))
+        self._cdf = MonotoneCubic(grid.H_faces, np.concatenate([[0.0], np.cumsum(self.ring_mass)]))
         self._pdf = self._cdf.derivative()
         self.mean_energy = float(np.sum(self.cell_mass * self.cell_H))
         self.mean_x2 = float(np.sum(self.cell_mass * self.cell_x**2))
@@ -353,8 +353,8 @@ def cell_values_at(model, grid: RingGrid, walls, values, x, y):
 
 def _coefficients(model, law):
     sub = model.substitute
-    m_nc = sp.lambdify((X, Y), sub(model.ito_drift + model.g), "numpy")
-    s2 = sp.lambdify((X, Y), sub(model.diffusion_squared), "numpy")
+    m_nc = lambdify_numeric((X, Y), sub(model.ito_drift + model.g))
+    s2 = lambdify_numeric((X, Y), sub(model.diffusion_squared))
     return Coefficients(model.restoring, model.potential, m_nc, s2, law.coefficient)
 
 

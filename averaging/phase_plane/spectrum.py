@@ -23,6 +23,7 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 import sympy as sp
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ParameterError
 from models import X, Y
 
@@ -169,7 +170,7 @@ def observable_values(model, observable, x, y):
     if extra:
         raise ParameterError(f"observable {observable!r}: unknown names {sorted(map(str, extra))}; use x, y, H and "
                              "the model's parameters")
-    f = sp.lambdify((X, Y, H_SYMBOL), expr, "numpy")
+    f = lambdify_numeric((X, Y, H_SYMBOL), expr)
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     with np.errstate(all="ignore"):

@@ -8,24 +8,28 @@ Usage::
 
 How it works:
 
-* ``_codegen``: the model's sympy expressions (Itô drift, sigma**2 and its y-derivative, G, the restitution law;
-  a Piecewise becomes a conditional expression) are printed into one numba module per (model structure, law
-  structure, scheme). Parameter values (delta, c, D, V_C, ...) are runtime arguments. The module is written to
-  ``$VIBRO_CACHE_DIR`` (default ``~/.cache/vibro-impact``) and numba's ``cache=True`` stores the machine code, so
-  another process loads it (``stats.compile_time`` reports generation + compile or load).
-* ``_schemes``: :data:`SCHEMES` (``em``, ``milstein``, ``splitting``, ``naive``), each with declared strong/weak
-  orders; every wall crossing is located on the step's free-flight segment and the law applied there, as often as
-  needed within one step.
+* ``_auto_codegen``: one code generator for every Monte Carlo kernel. A model's automaton (an
+  :class:`~models.ImpactOscillator` builds its own with ``to_automaton()``) is printed into one numba module per
+  (structure, scheme): drift, noise, guards, resets and observables; parameter values (delta, c, D, the restitution
+  law's numbers) are runtime arguments. The module is written to ``$VIBRO_CACHE_DIR`` (default
+  ``~/.cache/vibro-impact``) and numba's ``cache=True`` stores the machine code, so another process loads it
+  (``stats.compile_time`` reports generation + compile or load).
+* ``_front``: ``ImpactOscillator`` as a front end: :data:`AUTOMATON_SCHEME_OF` maps the oscillator schemes
+  (:data:`SCHEMES`: ``em``, ``milstein``, ``splitting``, ``naive``, each with declared strong/weak orders) to the
+  automaton's; every wall crossing is located on the step's interpolant and the law applied there, as often as
+  needed within one step (``naive`` drops the rest of the step). A restitution law given as a Python callable is
+  compiled by numba and called by the reset.
 * ``_rng``: xoshiro256** and a 256-layer ziggurat, one stream per chunk from ``SeedSequence(seed).spawn``.
 * ``_statistics``: integer histograms (H, (x, y), impact speeds) and one row of counts and sums per chunk; estimates
   are ratios of ``math.fsum`` sums with batch-means (per-chunk) 95 % intervals.
 * ``_problem``: :class:`EnsembleProblem` (what), :class:`MonteCarloAlgorithm` (how) and :class:`Execution`
   (where, how much), the argument groups of :func:`solve_ensemble`; :func:`simulate_ensemble` takes them flat.
 * ``_runner``: chunks of paths run on ``numba.get_num_threads()`` threads (a ``nogil`` kernel; each call interleaves
-  8 paths so that their dependency chains overlap) or on Dask; checkpoints and resume. A ``prange`` kernel gave the
-  same numbers but doubled the compile time (about 18 s instead of 7 s cold), hence the thread pool.
-* ``_cuda`` / ``_cuda_rng``: ``scheduler="cuda"``, the same generated step code in a numba-cuda kernel (one thread
-  per path, Philox-4x32-10 normals, block-shared histograms, launches with checkpoints); docs/gpu.md.
+  8 paths so that their dependency chains overlap) or on Dask; checkpoints and resume. :func:`sample_paths` stores
+  the very paths of the ensemble with the same seed; :func:`drive_paths` feeds given normals.
+* ``_cuda`` / ``_cuda_rng``: ``scheduler="cuda"``, the oscillator schemes' step code (``_schemes``, printed by
+  ``_codegen.Emitter``) in a numba-cuda kernel (one thread per path, Philox-4x32-10 normals, block-shared
+  histograms, launches with checkpoints); docs/gpu.md.
 
 Examples
 --------
@@ -34,7 +38,8 @@ Examples
 ['em', 'milstein', 'naive', 'splitting']
 """
 
-from ._codegen import Kernel, build_kernel, cache_dir, generate_source
+from ._codegen import cache_dir
+from ._front import Kernel, build_kernel, generate_source
 from ._problem import EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._rng import chunk_states, normals, ziggurat_tables
 from ._runner import (

@@ -4,7 +4,7 @@ The automaton's sympy expressions (Itô drift, noise matrix, guards, resets, che
 of change along the drift) become numba functions of ``(which, x, t, p)``, one per kind with a branch per mode or
 transition. Parameter values are not in the source (they arrive as the array ``p``), so changing a parameter never
 recompiles. The scheme is a constant of the generated module, so only its own code is compiled. The source is
-cached on disk by its hash, like the oscillator kernels.
+cached on disk by its hash (:func:`kernel_key`).
 
 Time ``t`` may appear in flows, noise, guards and resets (forcing, moving barriers).
 
@@ -48,10 +48,12 @@ from hybrid.errors import ModelError
 from ._codegen import _Printer
 
 TEMPLATE_VERSION = "6"
-SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4}
+SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4, "naive": 5}
 """The generated module's ``SCHEME``: Euler-Maruyama, Milstein (commutative noise), splitting (kick, free flight,
 noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight), BAOAB (kick by
-the force, half flight, exact Ornstein-Uhlenbeck step of the velocities, half flight, kick)."""
+the force, half flight, exact Ornstein-Uhlenbeck step of the velocities, half flight, kick), naive (the velocities'
+Euler-Maruyama step, then the positions' flight; at a crossing the reset is applied where the flight meets the guard
+and the rest of the step is dropped: the event time is wrong by up to a step, the anti-pattern kept for charts)."""
 MAX_EVENTS = 64
 """Events handled within one time step; more are counted as ``event_overflow`` (chattering or Zeno)."""
 TIME = real_symbol("t")
@@ -396,8 +398,9 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
         block(lines, [f"_y{i}" for i in range(n)], [xs[i] + increment(i, scheme == "milstein") for i in range(n)],
               "a")
     else:
-        if scheme == "symplectic":  # velocities by a Milstein step, then the positions' flight at the new ones
-            block(lines, [f"_y{i}" for i in vel], [xs[i] + increment(i, True) for i in vel], "a")
+        if scheme in ("symplectic", "naive"):  # velocities by a Milstein (naive: Euler-Maruyama) step, then the
+            # positions' flight at the new ones
+            block(lines, [f"_y{i}" for i in vel], [xs[i] + increment(i, scheme == "symplectic") for i in vel], "a")
         else:  # splitting: kick, free flight (positions only, at the kicked velocities), noise, kick
             block(lines, [f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
             # the noise and the closing kick at the end of the step (as in the event loop)
@@ -430,13 +433,18 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
 
 def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
                     cache: bool = True, summed=(), phases: bool = False,
-                    joint_only=()) -> tuple[str, AutomatonStructure]:
+                    joint_only=(), template: str | None = None, fields: dict | None = None
+                    ) -> tuple[str, AutomatonStructure]:
     """The numba module source of ``scheme`` for ``automaton`` and the structure it was derived from.
 
     ``observables`` maps names to sympy expressions of the states, parameters and ``t``; those named in
     ``summed`` are only summed (means and the joint histogram), not histogrammed; those named in ``joint_only``
     only feed the joint histogram (no sum, no histogram of their own: both stay zero). Phase sections are compiled in
     only with ``phases=True`` (they cost about 10 % of the compile time).
+
+    ``template`` replaces the CPU module's text (``_TEMPLATE``) by another built from the same pieces and filled with
+    the same fields, plus ``fields`` of its own: the CUDA target (:mod:`hybrid.stochastic._auto_cuda`) takes the
+    model's functions, the event code and the fast step from here.
     """
     st = analyse(automaton, convention)
     names = _Names(st)
@@ -506,7 +514,20 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     fast_checks_set = scheme not in ("splitting", "baoab") or not located
     ind = textwrap.indent
     observe = names.scalar_block("_ob", obs if obs else [sp.Integer(0)], {sp.Symbol("t"): sp.Symbol("_t1")})
-    src = _TEMPLATE.format(
+    step = dict(  # the pieces of _LANE_STEP
+        load=ind("\n".join([f"_x{i} = _L{i}[_l]" for i in range(n)]
+                            + ["mode = ML[_l]" if len(st.modes) > 1 else "mode = 0"]), " " * 16),
+        draw=ind("\n".join(f"z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)\n_w{k} = sdt * z"
+                           for k in range(m)) + "\n_slow = False", " " * 16),
+        fast=ind("\n".join(fast), " " * 16),
+        store_dw=ind("\n".join(f"DWL[npend, {k}] = _w{k}" for k in range(m)), " " * 20),
+        lane_to_x=ind("\n".join(f"x[{i}] = _L{i}[_l]" for i in range(n)), " " * 16),
+        load_dw=ind("\n".join(f"dw[{k}] = DWL[_q, {k}]" for k in range(m)), " " * 16),
+        reload=ind("\n".join(f"_L{i}[_l] = x[{i}]" for i in range(n)), " " * 16),
+        store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
+    )
+    src = (_TEMPLATE if template is None else template).format(
+        **(fields or {}),
         unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines() + [
             f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
             for o in range(len(obs))]) or "pass", " " * 4),
@@ -516,19 +537,10 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
                   " " * 4),
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
         init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
-        lane_to_x=ind("\n".join(f"x[{i}] = _L{i}[_l]" for i in range(n)), " " * 16),
         phase_block=ind(_PHASES.format(pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 8))
                         if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
                         " " * 12),
-        load=ind("\n".join([f"_x{i} = _L{i}[_l]" for i in range(n)]
-                            + ["mode = ML[_l]" if len(st.modes) > 1 else "mode = 0"]), " " * 16),
-        draw=ind("\n".join(f"z, s0, s1, s2, s3 = next_normal(s0, s1, s2, s3, zx, zk, zf)\n_w{k} = sdt * z"
-                           for k in range(m)) + "\n_slow = False", " " * 16),
-        fast=ind("\n".join(fast), " " * 16),
-        store_dw=ind("\n".join(f"DWL[npend, {k}] = _w{k}" for k in range(m)), " " * 20),
-        load_dw=ind("\n".join(f"dw[{k}] = DWL[_q, {k}]" for k in range(m)), " " * 16),
-        reload=ind("\n".join(f"_L{i}[_l] = x[{i}]" for i in range(n)), " " * 16),
-        store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
+        **step,  # the lane step's pieces stay fields of the module template too
         to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
         observe=ind(observe, " " * 16),
         fast_checks_set=fast_checks_set,
@@ -536,8 +548,14 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         version=TEMPLATE_VERSION, scheme=scheme, cache=cache, n=n, m=m, n_obs=max(len(obs), 1),
         n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
-        opening=ind(_LOCATED_OPENING if located else _PLAIN_OPENING, " " * 4),
-        fire=ind(_FIRE.format(when="t + best_s * tau"), " " * 12),
+        lane_step=_LANE_STEP.format(**step),
+        unpack_step=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines())
+                        or "pass", " " * 4),
+        lane_to_out=ind("\n".join(f"out[_g + _l, (step + 1) // every, {i}] = _L{i}[_l]" for i in range(n)),
+                        " " * 20),
+        opening=ind(_NAIVE_OPENING if scheme == "naive" else _LOCATED_OPENING if located else _PLAIN_OPENING,
+                    " " * 4),
+        fire=ind(_FIRE.format(when="t + best_s * tau") + (_NAIVE_DROP if scheme == "naive" else ""), " " * 12),
         o_step=ind(_LOCATED_O_STEP if located else _PLAIN_O_STEP, " " * 12),
         closing=ind(_LOCATED_CLOSING if located else _PLAIN_CLOSING, " " * 4),
         first=tuple(first) + (0,), count=tuple(count) + (0,), targets=tuple(targets) + (0,),
@@ -634,7 +652,7 @@ def kernel_key(src: str) -> str:
     return hashlib.sha256((source_hash(src) + dependency_hash(src)).encode()).hexdigest()[:16]
 
 
-_TEMPLATE = '''\
+_TEMPLATE_HEAD = '''\
 """Generated by hybrid.stochastic._auto_codegen (template {version}), scheme {scheme}. Do not edit."""
 import math
 
@@ -676,6 +694,9 @@ SCHEME = {scheme_code}
 {funcs}
 
 
+'''
+# the event code: crossings, their location and event_step (the CUDA target compiles it for the device too)
+_TEMPLATE_EVENTS = '''\
 @nb.njit(cache=CACHE)
 def crosses(d, g0, g1):
     # a state just reset onto the guard (g0 = 0) fires again only if the step carries it strictly beyond (with
@@ -834,12 +855,15 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
     return mode
 
 
+'''
+_TEMPLATE_DRIVE = '''\
 @nb.njit(cache=CACHE)
-def drive(x0, mode0, dws, dt, t0, p, out, elog, nlog):
+def drive(x0, mode0, dws, dt, t0, p, out, elog, nlog, bad):
     """Final states ``out`` (paths, N) of paths driven by given Brownian increments ``dws`` (paths, steps, M),
     every step through ``event_step`` (for convergence tests: sums of fine increments drive a coarse grid along
     the same Brownian path). ``elog[path]`` receives (time, transition, speed) of the path's first events and
-    ``nlog[path]`` the number of its events; returns the events handled."""
+    ``nlog[path]`` the number of its events; ``bad`` [firings whose check failed, the first one's speed, steps
+    over MAX_EVENTS]; returns the events handled."""
     n_paths = dws.shape[0]
     n_steps = dws.shape[1]
     x = np.empty(N)
@@ -863,7 +887,57 @@ def drive(x0, mode0, dws, dt, t0, p, out, elog, nlog):
         total += iw[IW_NLOG]
         for i in range(N):
             out[ip, i] = x[i]
+    bad[0] = iw[5]
+    bad[1] = fw[FW_FBAD]
+    bad[2] = iw[1]
     return total
+
+
+@nb.njit(nogil=True, cache=CACHE)
+def record_chunk(state, npaths, n_steps, every, dt, t0, x0, mode0, p, zx, zk, zf, out, bad):
+    """The paths of one chunk as ``run_chunk`` steps them (the same draws in the same order, the same code), with
+    no statistics: ``out[i, r]`` is the state of path i after r * every steps (r = 0: the start), ``bad`` as in
+    ``drive``."""
+    s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
+    sdt = math.sqrt(dt)
+    hdt = 0.5 * dt
+    x = np.empty(N)
+    ws = np.empty(WORK)
+    dw = np.empty(M)
+    ML = np.empty(LANES, dtype=np.int64)
+    PL = np.empty(LANES, dtype=np.int64)
+    DWL = np.empty((LANES, M))
+    iw = np.zeros(IW, dtype=np.int64)
+    fw = np.zeros(FW)
+    vhist = np.zeros((N_TRANS + 1, 1), dtype=np.int64)
+    v_scale = 0.0
+    v_bins = np.int64(0)  # np.int64, np.bool_: not literals, so that event_step is the one run_chunk compiled
+    elogs = np.empty((npaths, 0, 3))
+    nlogs = np.zeros(npaths, dtype=np.int64)
+    counts = np.zeros(6, dtype=np.int64)
+    rec = np.bool_(True)
+    track = np.bool_(False)
+    sample = np.bool_(False)
+{alloc}
+{unpack_step}
+    for _g in range(0, npaths, LANES):
+        nl = min(LANES, npaths - _g)
+        for _l in range(nl):
+{init}
+            ML[_l] = mode0
+            for i in range(N):
+                out[_g + _l, 0, i] = x0[i]
+        for step in range(n_steps):
+            t = t0 + step * dt
+            _t1 = t0 + (step + 1) * dt
+{lane_step}
+            if (step + 1) % every == 0:
+                for _l in range(nl):
+{lane_to_out}
+    bad[0] = iw[5]
+    bad[1] = fw[FW_FBAD]
+    bad[2] = iw[1]
+    state[0], state[1], state[2], state[3] = s0, s1, s2, s3
 
 
 @nb.njit(nogil=True, cache=CACHE)
@@ -889,6 +963,8 @@ def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, ps
                 phist[kp, o, int(b) + 1] += 1
 
 
+'''
+_TEMPLATE_OUTSIDE = '''\
 @nb.njit(cache=CACHE)
 def outside(mode, x, t, p):
     # the admissible set: no self-loop guard of the mode may be beyond its firing side
@@ -901,6 +977,8 @@ def outside(mode, x, t, p):
     return False
 
 
+'''
+_TEMPLATE_CHUNK = '''\
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
@@ -964,31 +1042,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                 if cs >= stride:
                     cs = 0
                     sample = True
-            npend = 0
-            for _l in range(nl):
-{load}
-{draw}
-{fast}
-                if _slow:  # the step is redone by event_step below, after the lane loop (no call in this loop)
-{store_dw}
-                    PL[npend] = _l
-                    npend += 1
-{store}
-            # the lanes whose guard may have fired, in lane order (event_step draws no normals, so the order of
-            # the draws, and every number, is that of a call inside the loop)
-            for _q in range(npend):
-                _l = PL[_q]
-{lane_to_x}
-{load_dw}
-                iw[IW_NLOG] = nlogs[_g + _l]  # the path's own event count: its log's next row
-                mode = event_step(ML[_l], x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
-                                  elogs[_g + _l])
-                nlogs[_g + _l] = iw[IW_NLOG]
-                ML[_l] = mode
-{reload}
-                # the admissible set at a sample; a fast step settles it itself (its guards are tested inside)
-                if sample and FAST_CHECKS_SET and outside(mode, x, _t1, p):
-                    counts[2] += 1
+{lane_step}
             # statistics in loops of their own: the stepping loop above, and the time average's loop, stay short
 {phase_block}
             if not sample:
@@ -1031,6 +1085,37 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
 '''
+_TEMPLATE = _TEMPLATE_HEAD + _TEMPLATE_EVENTS + _TEMPLATE_DRIVE + _TEMPLATE_OUTSIDE + _TEMPLATE_CHUNK
+
+
+_LANE_STEP = '''\
+            npend = 0
+            for _l in range(nl):
+{load}
+{draw}
+{fast}
+                if _slow:  # the step is redone by event_step below, after the lane loop (no call in this loop)
+{store_dw}
+                    PL[npend] = _l
+                    npend += 1
+{store}
+            # the lanes whose guard may have fired, in lane order (event_step draws no normals, so the order of
+            # the draws, and every number, is that of a call inside the loop)
+            for _q in range(npend):
+                _l = PL[_q]
+{lane_to_x}
+{load_dw}
+                iw[IW_NLOG] = nlogs[_g + _l]  # the path's own event count: its log's next row
+                mode = event_step(ML[_l], x, t, _t1, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws,
+                                  elogs[_g + _l])
+                nlogs[_g + _l] = iw[IW_NLOG]
+                ML[_l] = mode
+{reload}
+                # the admissible set at a sample; a fast step settles it itself (its guards are tested inside)
+                if sample and FAST_CHECKS_SET and outside(mode, x, _t1, p):
+                    counts[2] += 1'''
+"""One step of the ``nl`` lanes of a group (the generated fast step, then ``event_step`` for the lanes whose guard
+may have fired), shared by ``run_chunk`` and ``record_chunk``: a recorded path is a path of the ensemble."""
 
 
 # event_step's pieces: the sub-steps that move the velocities only (the opening kick or Milstein step, BAOAB's O step,
@@ -1073,6 +1158,23 @@ elif SCHEME == 3:
     for kv in range(N_POS):
         x[VEL[kv]] += xr[VEL[kv]]
 n_ev = 0"""
+
+
+_NAIVE_OPENING = """\
+# naive: the velocities' Euler-Maruyama step first (drift and noise at the start)
+drift(mode, x, t, p, f)
+noise(mode, x, t, p, G)
+for kv in range(N_POS):
+    i = VEL[kv]
+    acc = f[i] * dt
+    for k in range(M):
+        acc += G[i * M + k] * dw[k]
+    x[i] += acc
+n_ev = 0"""
+
+
+_NAIVE_DROP = """
+frac = 0.0  # naive: the rest of the step's flight is dropped (the event time is wrong by up to a step)"""
 
 
 _FIRE = """\

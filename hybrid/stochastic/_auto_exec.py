@@ -62,12 +62,15 @@ class AutomatonJob:
     ``shapes`` maps each name of :data:`PER_CHUNK` to ``(shape, dtype, fill)`` of one chunk's array.
     """
 
-    def __init__(self, name: str, src: str, args: dict, npaths: np.ndarray, shapes: dict, label: str | None = None):
+    def __init__(self, name: str, src: str, args: dict, npaths: np.ndarray, shapes: dict, label: str | None = None,
+                 user_law=None):
         self.name, self.src, self.args, self.npaths, self.shapes = name, src, args, npaths, shapes
         self.label = label  # the kernel's name in the compile notice (hybrid.stochastic._codegen.COMPILE_LOG)
+        self.user_law = user_law  # a numba-compiled restitution callable: the module is built in memory
 
     def module(self):
-        module, _ = _codegen.load_source(self.name, self.src, label=getattr(self, "label", None))
+        module, _ = _codegen.load_source(self.name, self.src, getattr(self, "user_law", None),
+                                         label=getattr(self, "label", None))
         return module
 
     def empty(self) -> dict:

@@ -58,7 +58,7 @@ class AutomatonScheme:
         1.0
         """
         additive = st is not None and _additive(st)
-        if self.name in ("em", "splitting"):  # neither has the Milstein correction
+        if self.name in ("em", "splitting", "naive"):  # none has the Milstein correction
             return {"strong": 1.0 if additive else 0.5, "weak": 1.0}
         if self.name == "baoab":  # noise free of the velocities on velocities only: no Milstein term exists
             return {"strong": 1.0, "weak": 2.0}
@@ -71,7 +71,7 @@ class AutomatonScheme:
                 "the noise is not commutative (L^j G_k != L^k G_j): Milstein would need Levy areas; use "
                 "scheme='em' (strong order 0.5) or, for a mechanical system with noise on the velocities, 'splitting'"
             )
-        if self.name in ("splitting", "symplectic", "baoab"):
+        if self.name in ("splitting", "symplectic", "baoab", "naive"):
             paired = {i for pair in st.pairs for i in pair}
             missing = [s for i, s in enumerate(st.states) if i not in paired]
             if missing:
@@ -419,9 +419,23 @@ def drive_automaton(automaton, scheme: str, dt: float, increments, x0, *, params
     out = np.empty((dws.shape[0], n))
     elog = np.full((dws.shape[0], n_log, 3), np.nan)
     nlog = np.zeros(dws.shape[0], dtype=np.int64)
+    bad = np.zeros(3)
     module.drive(x0, modes.index(mode0), dws, dt, 0.0, np.array([values[k] for k in st.params], dtype=float),
-                 out, elog, nlog)
+                 out, elog, nlog, bad)
+    _warn_driven(bad)
     return (out, elog, nlog) if n_log else out
+
+
+def _warn_driven(bad) -> None:
+    """Say what ``drive`` counted: firings whose check failed, steps over the cap of events."""
+    from hybrid.errors import VibroWarning
+
+    if bad[0]:
+        warnings.warn(f"{int(bad[0])} firings failed their transition's check (first at speed {bad[1]:.4g}): the "
+                      "reset is outside what the model declares valid there", VibroWarning, stacklevel=3)
+    if bad[2]:
+        warnings.warn(f"{int(bad[2])} steps hit the cap of {_auto_codegen.MAX_EVENTS} events (chattering or a Zeno "
+                      "accumulation inside one step); reduce dt", ChatteringWarning, stacklevel=3)
 
 
 def _as_float(name, value, positive=True):
@@ -454,7 +468,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                        threads: int | None = None, convention: str = "stratonovich",
                        max_path_steps: float = MAX_PATH_STEPS, check_dt: bool = True, phases: int = 0,
                        period: float | None = None, scheduler=None, checkpoint=None, resume: bool = False,
-                       checkpoint_every: int = 4, events: int = 0) -> AutomatonEnsemble:
+                       checkpoint_every: int = 4, events: int = 0, precision: str = "f64",
+                       threads_per_block: int = 128, launch_steps: int | None = None) -> AutomatonEnsemble:
     """Monte Carlo ensemble of a hybrid automaton with noise, crossings located inside the step.
 
     Parameters
@@ -462,7 +477,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     automaton : HybridAutomaton
         States, modes (flow, noise: one column per independent white noise), transitions (guard, direction,
         symbolic reset, priority, target).
-    scheme : {'em', 'milstein', 'splitting', 'symplectic', 'baoab'}
+    scheme : {'em', 'milstein', 'splitting', 'symplectic', 'baoab', 'naive'}
         Euler-Maruyama; Milstein (commutative noise); the mechanical splitting (kick, free flight of the
         positions with exact crossing location, noise, kick); the symplectic Milstein (the velocities' Milstein
         step, then the free flight of the positions at the new velocities, crossings located exactly: the
@@ -471,7 +486,9 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         noise free of the velocities). The last three need every state to be a position (d q/dt = v, no noise)
         or a velocity; they do not pump energy into lightly damped oscillators as the explicit em and milstein
         do (about dt omega**2 / c). A guard that depends on a velocity (an energy level) is also located in the
-        sub-steps that move only the velocities (kicks, noise, O step), at their instant.
+        sub-steps that move only the velocities (kicks, noise, O step), at their instant. ``naive`` (for charts
+        only) is symplectic Euler-Maruyama whose crossing resets the state where the flight meets the guard and drops
+        the rest of the step (the event time is wrong by up to a step); it also needs positions and velocities.
     dt, paths, t_end, t_burn : float, int, float, float
         Step, number of paths, end time, burn-in before statistics (time starts at 0).
     x0 : sequence of float
@@ -503,9 +520,14 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         How the modes' noise is meant (physical white noise: Stratonovich, with the Wong-Zakai drift).
     max_path_steps : float
         Refuse requests larger than this many path-steps.
-    scheduler : None, "threads", "dask", "dask=ADDRESS" or a ``distributed.Client``
+    scheduler : None, "threads", "dask", "dask=ADDRESS", "cuda" or a ``distributed.Client``
         Where chunks run: local threads (default) or Dask (a LocalCluster for "dask"; workers generate or load the
-        kernel from its source). Never changes a number.
+        kernel from its source), which never change a number; or "cuda": an NVIDIA GPU, one thread per path, the
+        same generated step code with counter-based (Philox) normals (:mod:`hybrid.stochastic._auto_cuda`), whose
+        numbers do not depend on the launch configuration but differ from the CPU streams'.
+    precision, threads_per_block, launch_steps : str, int, int or None
+        ``scheduler='cuda'`` only: 'f64' (default) or 'f32' arithmetic, the block size (a multiple of 32) and the
+        steps per launch (default: about 1e10 path-steps); neither of the last two changes a number.
     checkpoint, resume, checkpoint_every : path or None, bool, int
         Directory of a checkpoint (atomic, checksummed, tied to this run's exact settings) written every
         ``checkpoint_every`` chunks, at the end and on an interrupt; ``resume=True`` skips the chunks it holds.
@@ -651,9 +673,11 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if resume and ckdir is None:
         raise ParameterError("resume=True needs a checkpoint directory")
-    if not (scheduler in (None, "threads", "local") or hasattr(scheduler, "submit")
+    if not (scheduler in (None, "threads", "local", "cuda") or hasattr(scheduler, "submit")
             or (isinstance(scheduler, str) and scheduler.partition("=")[0] == "dask")):
-        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
+        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS, cuda or a Client")
+    if scheduler != "cuda" and (precision != "f64" or threads_per_block != 128 or launch_steps is not None):
+        raise ParameterError("precision, threads_per_block and launch_steps are options of scheduler='cuda'")
     if ckdir is not None:
         _auto_exec.check_directory(ckdir, resume)
 
@@ -673,25 +697,35 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 phase_steps=phase_steps)
     job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
     rows = {k: np.zeros((n_chunks, *shape), dtype=dtype) for k, (shape, dtype, _) in shapes.items()}
-    module = job.module()  # compile (or load) here, before the pilot and any worker
+    device = None
+    if scheduler == "cuda":  # the same generated step code on the GPU, one thread per path
+        from . import _auto_cuda
+
+        device = _auto_cuda.CudaRun(job, automaton, scheme, obs, convention, summed=summed, phases=phases,
+                                    n_trans=n_tr, seed=seed, precision=precision, threads_per_block=threads_per_block)
+    module = job.module() if device is None else None  # compile (or load) here, before the pilot and any worker
 
     step_rule = None
     if check_dt and n_tr:
         # a pilot on a copy of chunk 0's stream (the run's numbers do not change): refuse before the work
         n_steps = n_burn + n_samp * stride
-        pilot = job.run(0, states[0].copy(), burn=min(n_steps, max(5000, n_steps // 50)), samples=0, module=module,
-                        track=True)
-        step_rule = guard_step_rule(_guard_stats(pilot["gstat"][None]), [t.name for t in st.transitions], dt,
-                                    refuse=True, warn=True)
+        burn = min(n_steps, max(5000, n_steps // 50))
+        gstat = device.pilot(burn) if device is not None else _guard_stats(
+            job.run(0, states[0].copy(), burn=burn, samples=0, module=module, track=True)["gstat"][None])
+        step_rule = guard_step_rule(gstat, [t.name for t in st.transitions], dt, refuse=True, warn=True)
 
     run_id = _auto_exec.identity({
         "source": _auto_codegen.kernel_key(src), "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end,
         "t_burn": t_burn, "stride": stride, "seed": seed, "chunk_paths": chunk_paths, "x0": x0.tolist(),
         "mode0": mode0, "params": {k: float(v) for k, v in values.items()}, "histograms": histograms,
         "joint": joint, "speed_range": speed_range, "phases": phases, "period": period, "convention": convention,
-        "events": n_log})
+        "events": n_log, **({} if device is None else {"scheduler": "cuda", "device_source": device.name})})
     done = np.zeros(n_chunks, dtype=bool)
-    if ckdir is not None and resume:
+    device_settings = {}
+    if device is not None:  # other random streams: its own rows in the checkpoint (tied to the device source)
+        device_settings = device.run(rows, run_id=run_id, checkpoint=ckdir, resume=resume,
+                                     checkpoint_every=checkpoint_every, launch_steps=launch_steps)
+    elif ckdir is not None and resume:
         loaded = _auto_exec.load(ckdir, run_id, rows)
         done = loaded if loaded is not None else done
     since = 0
@@ -706,9 +740,11 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
             _auto_exec.write(ckdir, run_id, done, rows)
             since = 0
 
-    pending = [k for k in range(n_chunks) if not done[k]]
+    pending = [k for k in range(n_chunks) if not done[k]] if device is None else []
     try:
-        _auto_exec.execute(job, pending, states, accept, threads=threads or os.cpu_count() or 1, scheduler=scheduler)
+        if pending:
+            _auto_exec.execute(job, pending, states, accept, threads=threads or os.cpu_count() or 1,
+                               scheduler=scheduler)
     finally:
         if ckdir is not None and since:  # keep every finished chunk, also on an interrupt
             _auto_exec.write(ckdir, run_id, done, rows)
@@ -729,7 +765,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 "scheme": scheme, "dt": dt, "paths": paths, "t_end": t_end, "t_burn": t_burn, "stride": stride,
                 "seed": seed, "chunk_paths": chunk_paths, "histograms": dict(histograms), "joint": joint,
                 "params": values, "convention": convention, "orders": sch.orders(st), "step_rule": step_rule,
-                "phases": phases, "period": period, "events": n_log}
+                "phases": phases, "period": period, "events": n_log, **device_settings}
     if phases:
         settings.update(dt_requested=dt_requested, phase_steps=phase_steps)
     ens = AutomatonEnsemble(

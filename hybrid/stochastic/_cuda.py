@@ -46,6 +46,7 @@ from hybrid.errors import CudaUnavailableError, ModelError, ParameterError
 from hybrid.io import atomic_write
 
 from . import _codegen, _cuda_rng
+from ._auto_cuda import INSTALL_HINT, max_registers_from_env, require_cuda, simulator_enabled  # noqa: F401
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
 TEMPLATE_VERSION = "4"
@@ -53,7 +54,6 @@ CUDA_CHECKPOINT_FILE = "mc_cuda_checkpoint.npz"
 RNG = "philox4x32-10 box-muller"
 PRECISIONS = ("f64", "f32")
 SHARED_BYTES = 48 * 1024  # static shared memory of one block
-INSTALL_HINT = 'pip install -e ".[cuda]"'
 
 # local variables of the CPU kernel's step code (hybrid.stochastic._codegen) behind each statistics column
 COUNT_VARS = {"samples": "n_samples", "below": "n_below", "impacts_left": "n_il", "impacts_right": "n_ir",
@@ -63,52 +63,6 @@ SUM_VARS = {"H": "s_h", "x2": "s_x2", "y2": "s_y2", "impact_speed": "s_iv", "bad
             "bad_e_value": "bad_ev"}
 # per-chunk histograms of the CPU step code -> (block-shared histogram, its size, the overflow counter)
 SHARED_HISTS = {"vh": ("sh_v", "VB", "v_over"), "hist": ("sh_h", "HB", "h_over")}
-
-
-# ---------------------------------------------------------------------------------------------------- availability
-def simulator_enabled() -> bool:
-    """True when numba runs CUDA kernels on its simulator (``NUMBA_ENABLE_CUDASIM=1`` before numba's import)."""
-    from numba.core import config
-
-    return bool(config.ENABLE_CUDASIM)
-
-
-def require_cuda():
-    """``numba.cuda`` when a device (or the simulator) can run kernels, else :class:`CudaUnavailableError`.
-
-    A real device needs the numba-cuda package (numba's own ``numba.cuda`` is deprecated); the simulator of either
-    is accepted.
-
-    Examples
-    --------
-    >>> try:
-    ...     require_cuda()
-    ... except CudaUnavailableError as e:
-    ...     assert "\\n" not in str(e)
-    """
-    try:
-        from numba import cuda
-    except ImportError:
-        raise CudaUnavailableError(
-            f"scheduler='cuda' needs numba-cuda, which is not installed: {INSTALL_HINT}"
-        ) from None
-    if simulator_enabled():
-        return cuda
-    if getattr(cuda, "implementation", "") != "NVIDIA":
-        raise CudaUnavailableError(
-            f"scheduler='cuda' needs the numba-cuda package (numba's built-in CUDA target is not supported): "
-            f"{INSTALL_HINT}"
-        )
-    try:
-        ok = cuda.is_available()
-    except Exception:  # a broken driver install raises instead of answering False
-        ok = False
-    if not ok:
-        raise CudaUnavailableError(
-            "scheduler='cuda': no CUDA device was found (numba.cuda.is_available() is False); run on a machine with "
-            "an NVIDIA GPU and driver, or set NUMBA_ENABLE_CUDASIM=1 for numba's (slow) simulator"
-        )
-    return cuda
 
 
 # ---------------------------------------------------------------------------------------------------- generation
@@ -368,33 +322,6 @@ class CudaKernel:
 
 
 _RNG_HASH = hashlib.sha256(inspect.getsource(_cuda_rng).encode()).hexdigest()[:8]
-
-
-def max_registers_from_env() -> int | None:
-    """``VIBRO_CUDA_MAX_REGISTERS`` as an int (unset, empty or 0: no cap; the compiler chooses).
-
-    The f64 kernel uses about 140 registers per thread on sm_90 (ptxas, no spills): 3 blocks of 128 threads per
-    SM. A cap trades occupancy for spills; only a measurement on the device can tell which wins
-    (``benchmarks/gpu_throughput.py --max-registers 0,96,64``).
-
-    Examples
-    --------
-    >>> import os; os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None) and None
-    >>> max_registers_from_env() is None
-    True
-    """
-    import os
-
-    raw = os.environ.get("VIBRO_CUDA_MAX_REGISTERS", "").strip()
-    if not raw or raw == "0":
-        return None
-    try:
-        n = int(raw)
-    except ValueError:
-        n = -1
-    if not 16 <= n <= 255:
-        raise ParameterError(f"VIBRO_CUDA_MAX_REGISTERS={raw!r} must be an integer in [16, 255] (or 0: no cap)")
-    return n
 
 
 def build_cuda_kernel(model, scheme, hbins, vbins, nxy, precision="f64") -> CudaKernel:

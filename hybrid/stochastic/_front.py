@@ -1,25 +1,27 @@
 """Oscillator ensembles through the automaton kernel: ``ImpactOscillator`` as a front end of one generated path.
 
-``simulate_ensemble`` with the schemes ``milstein`` (the default) and ``splitting`` builds ``model.to_automaton()``
-and runs it on the kernel that :mod:`._auto_codegen` generates for every automaton:
+Every CPU ensemble of an oscillator (``simulate_ensemble``, ``drive_paths``, ``sample_paths``) builds
+``model.to_automaton()`` and runs it on the kernel that :mod:`._auto_codegen` generates for every automaton, with
+the automaton scheme of :data:`AUTOMATON_SCHEME_OF`:
 
-* ``milstein`` with the automaton's ``symplectic`` scheme: the velocity's Milstein step, then the free flight of
-  the position at the new velocity with each wall crossing located exactly and the restitution law applied there;
-* ``splitting`` with the automaton's ``baoab`` scheme: kick by the force, half flight, the velocity's exact
-  Ornstein-Uhlenbeck step, half flight, kick.
+* ``milstein`` as ``symplectic``: the velocity's Milstein step, then the free flight of the position at the new
+  velocity with each wall crossing located exactly and the restitution law applied there;
+* ``splitting`` as ``baoab``: kick by the force, half flight, the velocity's exact Ornstein-Uhlenbeck step, half
+  flight, kick;
+* ``em`` as ``em``: the straight segment of the step (the position's flight at the old velocity, the velocity's
+  increment spread linearly), crossings located on it;
+* ``naive`` as ``naive``: symplectic Euler-Maruyama whose crossing resets the state on the wall and drops the rest
+  of the step (the anti-pattern, for charts).
 
-Each is the oscillator kernel's scheme step for step, and chunk k draws the same normals in the same order (lanes
-of 8 paths), so the two kernels give the same paths up to rounding (the tests compare histograms bin for bin).
-Each chunk's automaton statistics are converted into the rows of :class:`EnsembleStatistics`, so checkpoints,
-merging, confidence intervals and the result checks are shared.
-
-The oscillator kernel stays for what the automaton kernel does not reproduce: ``em`` (it keeps the step's
-increment across an impact), ``naive``, a restitution law given as a Python callable (the automaton kernel needs a
-symbolic reset), the GPU, and the driven or stored paths of ``drive_paths`` / ``sample_paths``.
+The restitution law's numbers are lifted into parameters (one compiled kernel for every r or V_C); a law given as a
+Python callable is compiled by numba and called by the reset (that module is built in memory). Each chunk's
+automaton statistics are converted into the rows of :class:`EnsembleStatistics`, so checkpoints, merging,
+confidence intervals and the result checks are shared.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import time
 
@@ -27,21 +29,27 @@ import numpy as np
 import sympy as sp
 
 from hybrid.automaton import real_symbol
-from hybrid.errors import ModelError
+from hybrid.errors import ModelError, ParameterError
 
 from . import _auto_codegen, _auto_exec, _codegen, _rng
 from ._statistics import COUNTS, SUMS
 
-KERNELS = ("auto", "automaton", "oscillator")
-"""Values of ``MonteCarloAlgorithm.kernel``: ``auto`` takes the automaton kernel wherever it reproduces the scheme."""
+KERNELS = ("auto", "automaton")
+"""Values of ``MonteCarloAlgorithm.kernel``: both run every CPU ensemble on the automaton kernel (``auto`` is kept
+for the GPU, where ``automaton`` is refused)."""
 
 _X, _Y = real_symbol("x"), real_symbol("y")
 _SUMMED = ("x2", "y2", "below")
 _JOINT = ("x", "y")  # the joint histogram's coordinates: neither summed nor histogrammed on their own
 
 
-AUTOMATON_SCHEME_OF = {"milstein": "symplectic", "splitting": "baoab"}
+AUTOMATON_SCHEME_OF = {"milstein": "symplectic", "splitting": "baoab", "em": "em", "naive": "naive"}
 """The automaton scheme that takes each oscillator scheme's steps (same draws, same order of operations).
+
+``em`` is the automaton's Euler-Maruyama on the straight segment of the step (for an oscillator: the position's
+flight at the old velocity, the velocity's increment spread linearly over the step); after a crossing the rest of
+the step is a fresh Euler-Maruyama step of what is left of it from the reset state. ``naive`` drops the rest of the
+step at a crossing.
 
 Examples
 --------
@@ -50,25 +58,98 @@ Examples
 """
 
 
-def reproduces(model, scheme) -> bool:
-    """True when the automaton kernel reproduces ``scheme`` on ``model`` (milstein or splitting, with a law given
-    as an expression).
+def check_model(model, scheme) -> None:
+    """Refuse, in one line, what the automaton kernel cannot run: a scheme it has no counterpart of, a model without
+    a closed-form potential (the energy H is an observable of every ensemble), a model the scheme refuses."""
+    if scheme.name not in AUTOMATON_SCHEME_OF:
+        raise ParameterError(f"scheme {scheme.name!r} has no automaton kernel; use one of "
+                             f"{sorted(AUTOMATON_SCHEME_OF)}")
+    if model.energy_expr is None:
+        raise ModelError(
+            f"sympy cannot integrate g = {model.g} in closed form, and the Monte Carlo kernel needs the potential G(x) "
+            "for the energy H; declare a restoring force with an elementary antiderivative"
+        )
+    scheme.check(model)
+
+
+def kernel_module(model, scheme: str):
+    """The loaded automaton kernel of ``model`` for the oscillator scheme ``scheme`` (the ensembles' module: its
+    ``drive`` and ``record_chunk`` are compiled at their first call only) and its parameter vector."""
+    auto_scheme = AUTOMATON_SCHEME_OF[scheme]
+    automaton, _, src, st = _generated(model, auto_scheme)
+    name, user_law = kernel_name(model, auto_scheme, src)
+    module, _ = _codegen.load_source(name, src, user_law, label=f"{model.name}/{auto_scheme}")
+    return module, np.array([automaton.parameters[k] for k in st.params], dtype=float)
+
+
+def generate_source(model, scheme, cache: bool = True) -> tuple[str, tuple[float, ...], object | None]:
+    """The source of the Monte Carlo kernel of ``model`` and ``scheme`` (a name or Scheme), generated from
+    ``model.to_automaton()``, with the restitution law's numbers and its numba-compiled callable (or None).
+
+    The law's numbers are parameters of the kernel (``_law0, ...``), so the source is the same for every value;
+    ``cache`` is kept for compatibility (a callable law's kernel is never cached on disk).
 
     Examples
     --------
     >>> from models import DuffingImpact
-    >>> from hybrid.stochastic import SCHEMES
-    >>> reproduces(DuffingImpact(), SCHEMES["splitting"]), reproduces(DuffingImpact(), SCHEMES["em"])
-    (True, False)
+    >>> src, law_values, _ = generate_source(DuffingImpact(), "milstein")
+    >>> "def run_chunk" in src, law_values[0]
+    (True, 0.4)
     """
-    if not (scheme.name in AUTOMATON_SCHEME_OF and getattr(model.restitution, "callable", None) is None
-            and model.energy_expr is not None):
-        return False
-    try:  # a model the scheme refuses stays on the oscillator path, which says why in the scheme's own words
-        scheme.check(model)
-    except ModelError:
-        return False
-    return True
+    from ._schemes import get_scheme
+
+    sch = get_scheme(scheme)
+    _codegen.refuse_forced(model)
+    check_model(model, sch)
+    automaton, _, src, _ = _generated(model, AUTOMATON_SCHEME_OF[sch.name])
+    _, user_law = kernel_name(model, AUTOMATON_SCHEME_OF[sch.name], src)
+    law = tuple(float(v) for k, v in automaton.parameters.items() if k.startswith("_law"))
+    return src, law, user_law
+
+
+@dataclasses.dataclass
+class Kernel:
+    """A loaded Monte Carlo kernel: its module (``run_chunk``, ``drive``, ``record_chunk``), source, identity and
+    the wall time of :func:`build_kernel` (generation and compile, or load from numba's disk cache)."""
+
+    module: object
+    path: object
+    param_names: tuple
+    law_values: tuple
+    scheme: str
+    source: str
+    compile_time: float = float("nan")
+    identity: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def run_chunk(self):
+        return self.module.run_chunk
+
+
+def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel:
+    """Generate and load (and with ``warm`` compile, or load from numba's cache) the kernel of ``model`` and
+    ``scheme``: the one :func:`~hybrid.stochastic.simulate_ensemble` runs.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> k = build_kernel(DuffingImpact(), "splitting")  # doctest: +SKIP
+    """
+    from ._schemes import get_scheme
+
+    t0 = time.perf_counter()
+    sch = get_scheme(scheme)
+    src, law, _ = generate_source(model, sch, cache)
+    if warm:  # the smallest run: one path, one step
+        s = dict(n_chunks=1, chunk_paths=1, paths=1, xy_bins=None, xy_range=None, bins=1, v_bins=1, n_burn=0,
+                 n_samp=1, stride=1, dt=1e-3, x0=[0.0, 0.0], seed=0)
+        kern, _ = build(model, s, 1.0, 1.0, (1.0, 1.0), sch.name)
+        module, identity = kern.module, kern.identity
+    else:
+        module, _ = kernel_module(model, sch.name)
+        identity = {}
+    return Kernel(module, getattr(module, "__file__", None), tuple(model.params), law, sch.name, src,
+                  time.perf_counter() - t0, identity)
 
 
 class AutomatonKernel:
@@ -96,7 +177,7 @@ class AutomatonChunks:
         self.right = transitions.index("right") if "right" in transitions else -1
 
     def run(self, ids, states, module=None):
-        """Run chunks ``ids`` (with their RNG ``states``); the per-chunk arrays of the oscillator kernel."""
+        """Run chunks ``ids`` (with their RNG ``states``); the per-chunk arrays of :class:`EnsembleStatistics`."""
         if module is None:
             module = self.job.module()
         n, bins, vb = len(ids), self.bins, self.v_bins
@@ -140,7 +221,7 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     t0 = time.perf_counter()
     auto_scheme = AUTOMATON_SCHEME_OF[scheme]
     automaton, observables, src, st = _generated(model, auto_scheme)
-    name = f"vibro_auto_{auto_scheme}_{_auto_codegen.kernel_key(src)}"
+    name, user_law = kernel_name(model, auto_scheme, src)
     s = settings
     n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
     npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
@@ -164,15 +245,53 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
         j_lo=np.array([xlo, ylo], dtype=float), j_scale=np.array(xy_scales, dtype=float),
         j_bins=np.array([nx, ny], dtype=np.int64), v_scale=v_scale, v_bins=s["v_bins"], phases=0, phase_steps=1,
     )
-    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes, label=f"{model.name}/{auto_scheme}")
+    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes, label=f"{model.name}/{auto_scheme}",
+                                  user_law=user_law)
     module = job.module()
     job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
-    # the law's numbers in full precision (they are parameters of the kernel, not in its source)
-    law = [float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")]
+    # the law's numbers in full precision (they are parameters of the kernel, not in its source); a callable's code
+    fn = getattr(model.restitution, "callable", None)
+    law = ([float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")] if fn is None
+           else [_codegen.callable_digest(fn)])
     key = hashlib.sha256((src + _codegen.dependency_hash(src)).encode()).hexdigest()[:32]
     identity = {"kernel": key, "law": [model.restitution.spec(), *law]}
     kern = AutomatonKernel(module, identity, time.perf_counter() - t0)
     return kern, AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions))
+
+
+_USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a kernel name is never reused
+
+
+def kernel_name(model, scheme: str, src: str) -> tuple[str, object | None]:
+    """The module name of the automaton kernel ``src`` and, for a restitution law given as a Python callable, the
+    callable compiled by numba (the module is then built in memory, its name carrying the callable's id).
+
+    The source of such a kernel calls ``_user_law`` and is the same for every callable law, as the source of an
+    expression law is the same for every value of its numbers; the module binds the compiled callable.
+    """
+    name = f"vibro_auto_{scheme}_{_auto_codegen.kernel_key(src)}"
+    fn = getattr(model.restitution, "callable", None)
+    if fn is None:
+        return name, None
+    _, _, jitted = _codegen._law_code(model.restitution)  # a one-line RestitutionError where numba cannot
+    _USER_LAWS.setdefault(id(fn), fn)
+    return f"{name}_law{id(fn):x}", jitted
+
+
+def with_user_law(automaton):
+    """``automaton`` with the walls' numerical reset (a callable restitution law) made symbolic: y -> -e(|y|) y
+    with e the function :data:`~hybrid.stochastic._codegen.USER_LAW` that the kernel binds, checked in (0, 1]."""
+    from hybrid.automaton import HybridAutomaton, Transition
+
+    e = sp.Function(_codegen.USER_LAW)(sp.Abs(_Y))
+    transitions = [Transition(t.name, t.source, t.target, t.guard, t.direction, (_X, _Y), t.priority)
+                   for t in automaton.transitions]
+    out = HybridAutomaton(automaton.states, dict(automaton.parameters), list(automaton.modes), transitions,
+                          initial_mode=automaton.initial_mode, observables=dict(automaton.observables))
+    for tr in transitions:  # set past the declaration's checks, which refuse unknown functions in a user's model
+        object.__setattr__(tr, "reset", (_X, -e * _Y))
+        object.__setattr__(tr, "check", sp.And(e > 0, e <= 1))
+    return out
 
 
 _GENERATED: dict = {}
@@ -181,14 +300,16 @@ _GENERATED: dict = {}
 def _generated(model, scheme: str = "symplectic"):
     """The lifted automaton, its observables, the kernel source and structure of ``model`` (memoised: the sympy
     work costs 40-90 ms, as much as a short run)."""
-    law = sp.sympify(model.restitution.expression(sp.Abs(_Y)))
+    user = getattr(model.restitution, "callable", None) is not None
+    law = (sp.Function(_codegen.USER_LAW)(sp.Abs(_Y)) if user
+           else sp.sympify(model.restitution.expression(sp.Abs(_Y))))
     # srepr keeps every float in full precision (str and the fingerprint keep 15 digits)
     declared = (model.g, model.h, tuple(model.f), sp.Matrix(model.intensity), model.epsilon, model.barrier_exprs)
     key = (scheme, type(model).__name__, sp.srepr(declared), type(model.restitution).__name__, sp.srepr(law),
            tuple(float.hex(float(a)) for a in sp.preorder_traversal(law) if isinstance(a, sp.Float)),
            tuple((k, float.hex(float(v))) for k, v in model.params.items()))
     if key not in _GENERATED:
-        automaton = lift_law_numbers(model.to_automaton())
+        automaton = with_user_law(model.to_automaton()) if user else lift_law_numbers(model.to_automaton())
         energy = model.energy_expr
         walls = [b for b in (model.barrier_exprs or ()) if b.is_finite is not False and b not in (sp.oo, -sp.oo)]
         if walls:
@@ -197,8 +318,9 @@ def _generated(model, scheme: str = "symplectic"):
         else:
             below = sp.Integer(1)
         observables = {"H": energy, "x2": _X**2, "y2": _Y**2, "below": below, "x": _X, "y": _Y}
+        # a callable law's module is built in memory: numba cannot cache its machine code on disk
         src, st = _auto_codegen.generate_source(automaton, scheme, observables, summed=_SUMMED,
-                                                joint_only=_JOINT)
+                                                joint_only=_JOINT, cache=not user)
         if len(_GENERATED) > 256:
             _GENERATED.clear()
         _GENERATED[key] = (automaton, observables, src, st)

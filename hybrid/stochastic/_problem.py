@@ -71,11 +71,9 @@ class MonteCarloAlgorithm:
         Apply the step rule (refuse a step that can jump across the gap, warn on a coarse one).
     precision : {"f64", "f32"}
         Floating point of the kernel (``f32`` only on the ``cuda`` scheduler).
-    kernel : {"auto", "automaton", "oscillator"}
-        Which generated CPU kernel runs the scheme: the one generated from ``model.to_automaton()`` for every
-        automaton, or the oscillator's own. ``auto`` takes the automaton kernel wherever it reproduces the scheme
-        (``milstein`` and ``splitting`` with a restitution law given as an expression, as the automaton's
-        ``symplectic`` and ``baoab``: the same paths up to rounding).
+    kernel : {"auto", "automaton"}
+        The CPU kernel: the one generated from ``model.to_automaton()``, for every scheme (as the automaton's
+        ``symplectic``, ``baoab``, ``em`` and ``naive``) and every restitution law.
 
     Examples
     --------

@@ -20,7 +20,7 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from hybrid.automaton import real_symbol
+from hybrid.automaton import lambdify_numeric, real_symbol
 from hybrid.errors import (
     CheckpointError,
     HistogramRangeWarning,
@@ -219,7 +219,7 @@ def _check_noise(model, h_max: float = 4.0) -> None:
     xx, yy = np.meshgrid(xs, ys)
     with np.errstate(all="ignore"):
         try:
-            val = np.broadcast_to(np.asarray(sp.lambdify((X, Y), s2, "numpy")(xx, yy), dtype=float), xx.shape)
+            val = np.broadcast_to(np.asarray(lambdify_numeric((X, Y), s2)(xx, yy), dtype=float), xx.shape)
         except (TypeError, ValueError) as exc:
             raise ParameterError(f"the noise gives sigma^2 = {s2}, which is not a real number ({exc})") from None
     bad = ~(val >= 0.0)
@@ -372,62 +372,16 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
     }
 
 
-class _Job:
-    """Everything a chunk needs besides its id: kernel arguments (picklable, for Dask)."""
-
-    def __init__(self, model, kern, settings):
-        s = settings
-        self.source = kern.source
-        self.name = kern.module.__name__
-        self.prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
-        self.rprm = np.array(kern.law_values, dtype=float)
-        self.scalars = self.scales(model, s)
-        self.seed = s["seed"]
-        self.n_chunks = s["n_chunks"]
-        self.paths = s["paths"]
-        self.chunk_paths = s["chunk_paths"]
-
-    @staticmethod
-    def scales(model, s: dict) -> dict:
-        """The kernel's scalar arguments: steps, start, walls and bin scales (shared with the automaton kernel)."""
-        left, right = model.barriers
-        xy = s["xy_bins"]
-        (xlo, xhi), (ylo, yhi) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
-        nx, ny = xy if xy is not None else (1, 1)
-        return dict(
-            n_burn=s["n_burn"], n_samp=s["n_samp"], stride=s["stride"], dt=s["dt"], x0=s["x0"][0], y0=s["x0"][1],
-            wl=float(left), wr=float(right), h_scale=_bin_scale(0.0, s["h_max"], s["bins"]), hbins=s["bins"],
-            g_bar=s["g_barrier"], xlo=float(xlo), x_scale=_bin_scale(xlo, xhi, nx), nx=nx, ylo=float(ylo),
-            y_scale=_bin_scale(ylo, yhi, ny), ny=ny, do_xy=xy is not None,
-            v_scale=_bin_scale(0.0, s["v_max"], s["v_bins"]), vbins=s["v_bins"],
-        )
-
-    def npaths(self, ids):
-        ids = np.asarray(ids, dtype=np.int64)
-        return np.minimum(self.chunk_paths, self.paths - ids * self.chunk_paths).astype(np.int64)
-
-    def run(self, ids, states, module=None):
-        """Run chunks ``ids`` (with their RNG ``states``); returns the per-chunk arrays."""
-        if module is None:
-            module, _ = _codegen.load_source(self.name, self.source)
-        sc = self.scalars
-        n = len(ids)
-        hist = np.zeros((n, sc["hbins"]), np.int64)
-        xyh = np.zeros((n, sc["ny"], sc["nx"]) if sc["do_xy"] else (n, 1, 1), np.int64)
-        vh = np.zeros((n, sc["vbins"]), np.int64)
-        cnt = np.zeros((n, len(COUNTS)), np.int64)
-        sm = np.zeros((n, len(SUMS)))
-        zx, zk, zf = _rng.ziggurat_tables()
-        module.run_chunks(
-            np.ascontiguousarray(states, dtype=np.uint64), self.npaths(ids), sc["n_burn"], sc["n_samp"], sc["stride"],
-            sc["dt"], sc["x0"], sc["y0"], self.prm, self.rprm, sc["wl"], sc["wr"], zx, zk, zf, sc["h_scale"],
-            sc["hbins"], sc["g_bar"], sc["xlo"], sc["x_scale"], sc["nx"], sc["ylo"], sc["y_scale"], sc["ny"],
-            sc["do_xy"], sc["v_scale"], sc["vbins"], hist, xyh, vh, cnt, sm,
-        )
-        return np.asarray(ids, np.int64), self.npaths(ids), hist, xyh, vh, cnt, sm
+def _scales(s: dict) -> dict:
+    """The bin scales of the run ``s``: H on [0, h_max], (x, y) on ``xy_range``, impact speeds on [0, v_max]."""
+    xy = s["xy_bins"]
+    (xlo, xhi), (ylo, yhi) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
+    nx, ny = xy if xy is not None else (1, 1)
+    return dict(h_scale=_bin_scale(0.0, s["h_max"], s["bins"]), x_scale=_bin_scale(xlo, xhi, nx),
+                y_scale=_bin_scale(ylo, yhi, ny), v_scale=_bin_scale(0.0, s["v_max"], s["v_bins"]))
 
 
-def _remote_run(job: _Job, ids, states):
+def _remote_run(job, ids, states):
     """Dask task: load (or generate) the kernel on the worker and run the chunks."""
     return job.run(ids, states)
 
@@ -561,11 +515,11 @@ def simulate_ensemble(model, scheme="milstein", dt=1e-3, paths=256, t_end=2200.0
         Floating point of the ``cuda`` kernel (the CPU kernels are double only).
     threads_per_block, launch_steps : int
         ``cuda`` only: block size and steps per kernel launch; neither changes any number.
-    kernel : {"auto", "automaton", "oscillator"}
-        The CPU kernel: ``auto`` (default) runs ``milstein`` and ``splitting`` with a law given as an expression
-        on the kernel generated from ``model.to_automaton()`` (its ``symplectic`` and ``baoab`` schemes: the same
-        paths up to rounding), every other case on the oscillator's own kernel; ``settings['kernel']`` says which
-        ran.
+    kernel : {"auto", "automaton"}
+        The CPU kernel, for every scheme and law: the one generated from ``model.to_automaton()``, whose schemes
+        :data:`~hybrid.stochastic.AUTOMATON_SCHEME_OF` takes for the oscillator's (``milstein``: ``symplectic``,
+        ``splitting``: ``baoab``, ``em``, ``naive``); a restitution law given as a numba-compilable Python callable
+        is called by its reset. ``settings['kernel']`` says which ran (``cuda`` on the GPU).
     check_dt : bool
         Apply :func:`check_step` (refuse or warn on coarse steps).
     max_path_steps, max_memory : float
@@ -686,26 +640,18 @@ def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execu
 
 
 def _choose_kernel(model, sch, kernel, gpu: bool) -> str:
-    """The CPU kernel that runs the scheme: 'automaton' where it reproduces it (and was not declined), else
-    'oscillator'; 'cuda' on the GPU."""
+    """The kernel that runs the scheme: 'automaton' on the CPU (every scheme, every law), 'cuda' on the GPU."""
     if kernel not in _front.KERNELS:
-        raise ParameterError(f"kernel={kernel!r}; use one of {list(_front.KERNELS)}")
+        hint = (" (the oscillator's own CPU kernel is gone: every CPU ensemble runs on the kernel generated from "
+                "model.to_automaton())" if kernel == "oscillator" else "")
+        raise ParameterError(f"kernel={kernel!r}; use one of {list(_front.KERNELS)}{hint}")
     if gpu:
         if kernel == "automaton":
             raise ParameterError("kernel='automaton' is a CPU kernel; scheduler='cuda' runs its own GPU kernel: "
                                  "drop one of them")
         return "cuda"
-    if kernel == "oscillator":
-        return "oscillator"
-    if _front.reproduces(model, sch):
-        return "automaton"
-    if kernel == "automaton":
-        raise ParameterError(
-            f"kernel='automaton' runs the schemes 'milstein' and 'splitting' with a restitution law given as an "
-            f"expression (as the automaton's 'symplectic' and 'baoab'); scheme {sch.name!r} with "
-            f"{model.restitution!r} runs on the oscillator "
-            "kernel: use kernel='auto', or simulate_automaton(model.to_automaton(), ...) for the automaton schemes")
-    return "oscillator"
+    _front.check_model(model, sch)  # before anything is compiled
+    return "automaton"
 
 
 def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics:
@@ -724,16 +670,11 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
             "checkpoint could be resumed with another law; run without a checkpoint or declare the law as an "
             "expression of v"
         )
-    if settings["kernel"] == "automaton":
-        probe = _Job.scales(model, settings)
-        kern, job = _front.build(model, settings, probe["h_scale"], probe["v_scale"],
-                                 (probe["x_scale"], probe["y_scale"]), sch.name)
-        names = tuple(model.params)
-    else:
-        kern = _codegen.build_kernel(model, sch)
-        job = _Job(model, kern, settings)
-        names = kern.param_names
-    settings["identity"] = {**kern.identity, "params": {k: float.hex(float(model.params[k])) for k in names}}
+    scales = _scales(settings)
+    kern, job = _front.build(model, settings, scales["h_scale"], scales["v_scale"],
+                             (scales["x_scale"], scales["y_scale"]), sch.name)
+    settings["identity"] = {**kern.identity,
+                            "params": {k: float.hex(float(model.params[k])) for k in tuple(model.params)}}
     states = _rng.chunk_states(settings["seed"], settings["n_chunks"])
 
     stats = None
@@ -871,7 +812,8 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     """Final states (paths, 2) of paths driven by given standard normals ``normals`` (paths, steps), one per step.
 
     For convergence tests: summing fine normals in blocks of m and dividing by sqrt(m) gives the same Brownian path
-    on a coarser grid. No statistics, no step-size rule.
+    on a coarser grid. Every step goes through the automaton kernel's event loop (its ``drive``). No statistics, no
+    step-size rule.
 
     Examples
     --------
@@ -883,31 +825,36 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     sch = get_scheme(scheme)
     x0 = _as_x0(x0)
     _check_noise(model)
-    kern = _codegen.build_kernel(model, sch, warm=False)
+    _front.check_model(model, sch)
     z = np.ascontiguousarray(normals, dtype=float)
     if z.ndim != 2:
         raise ParameterError(f"normals must be a 2-D array (paths, steps), got shape {z.shape}")
+    if not (math.isfinite(dt) and dt > 0):
+        raise ParameterError(f"dt={dt!r} must be a finite positive number")
+    module, prm = _front.kernel_module(model, sch.name)
     n = z.shape[0]
-    prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
-    left, right = model.barriers
+    # the increments as the ensembles form them: sqrt(dt) * z
+    dws = np.ascontiguousarray((math.sqrt(float(dt)) * z)[:, :, None])
+    out = np.empty((n, 2))
     bad = np.zeros(3)
     try:
-        out = kern.integrate_normals(np.full(n, float(x0[0])), np.full(n, float(x0[1])), z, float(dt), prm,
-                                     np.array(kern.law_values, dtype=float), float(left), float(right), bad)
+        module.drive(np.array(x0, dtype=float), 0, dws, float(dt), 0.0, prm, out, np.empty((n, 0, 3)),
+                     np.zeros(n, dtype=np.int64), bad)
     except VibroError:
         raise
     except Exception as exc:
         raise _run_error(model, exc) from exc
-    _refuse_bad_e(model, int(bad[0]), bad[1], bad[2], "of the driven paths")
+    _refuse_failed_checks(model, bad, "of the driven paths")
     return out
 
 
 def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=10, seed=1, x0=(0.0, 0.0),
-                 check_dt=True):
+                 check_dt=True, *, chunk_paths=None):
     """Store a few paths: times (n,), x and y (paths, n) every ``every`` steps, for plots and checks.
 
-    The ensemble statistics never store paths; this draws from its own stream (``SeedSequence(seed)``), so the
-    paths are not members of a :func:`simulate_ensemble` run with the same seed. At most 10**7 stored values.
+    The paths are those of :func:`simulate_ensemble` with the same model, scheme, ``dt``, ``paths``, ``t_end``,
+    ``seed`` and ``chunk_paths`` (the same kernel steps them with the same draws), stored instead of summarised.
+    At most 10**7 stored values.
 
     Examples
     --------
@@ -930,21 +877,46 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     x0 = _as_x0(x0)
     _check_x0(model, x0)
     _check_noise(model)
-    left, right = model.barriers
+    _front.check_model(model, sch)
+    chunk = (default_chunk_paths(paths, float(t_end) / float(dt)) if chunk_paths is None
+             else _positive_int("chunk_paths", chunk_paths))
+    chunk = min(chunk, paths)  # as simulate_ensemble chooses it: the same chunks, the same streams
+    states = _rng.chunk_states(seed, check_chunk_count(paths, chunk))
     if check_dt:
         check_step(model, dt, scheme=sch)
-    kern = _codegen.build_kernel(model, sch, warm=False)
+    module, prm = _front.kernel_module(model, sch.name)
     zx, zk, zf = _rng.ziggurat_tables()
-    state = _rng.chunk_states(seed, 1)[0].copy()
-    prm = np.array([model.params[k] for k in kern.param_names], dtype=float)
+    nrec = nstep // every + 1
+    out = np.empty((paths, nrec, 2))
     bad = np.zeros(3)
-    try:
-        out = kern.record_paths(state, paths, nstep, every, float(dt), float(x0[0]), float(x0[1]), prm,
-                                np.array(kern.law_values, dtype=float), float(left), float(right), zx, zk, zf, bad)
-    except VibroError:
-        raise
-    except Exception as exc:
-        raise _run_error(model, exc) from exc
-    _refuse_bad_e(model, int(bad[0]), bad[1], bad[2], "of the sampled paths")
-    t = np.arange(out.shape[1]) * every * dt
+    for k, state in enumerate(states):
+        lo = k * chunk
+        part = np.zeros(3)
+        try:
+            module.record_chunk(state.copy(), min(chunk, paths - lo), (nrec - 1) * every, every, float(dt), 0.0,
+                                np.array(x0, dtype=float), 0, prm, zx, zk, zf, out[lo: lo + chunk], part)
+        except VibroError:
+            raise
+        except Exception as exc:
+            raise _run_error(model, exc) from exc
+        if part[0] and not bad[0]:
+            bad[1] = part[1]
+        bad[0] += part[0]
+        bad[2] += part[2]
+    _refuse_failed_checks(model, bad, "of the sampled paths")
+    t = np.arange(nrec) * every * dt
     return t, out[:, :, 0], out[:, :, 1]
+
+
+def _refuse_failed_checks(model, bad, where: str) -> None:
+    """:func:`_refuse_bad_e` for the kernel's ``bad`` (failed checks, first speed, steps over the event cap)."""
+    if bad[0]:
+        v = float(bad[1])
+        try:
+            e = float(np.asarray(model.restitution.coefficient(np.array([v])), dtype=float)[0])
+        except Exception:  # a law that fails at that speed: it is refused all the same
+            e = float("nan")
+        _refuse_bad_e(model, int(bad[0]), v, e, where)
+    if bad[2]:
+        warnings.warn(f"{int(bad[2])} steps {where} hit the cap of events in one step (chattering); reduce dt",
+                      ChatteringWarning, stacklevel=3)

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hybrid.automaton import lambdify_numeric
 from hybrid.errors import ParameterError
 
 
@@ -146,7 +147,7 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
                              f"parameters {sorted(model.params)}, or H")
     expr = expr.xreplace({sp.Symbol(k): v for k, v in model.params.items()})
     expr = expr.xreplace({s: names[str(s)] for s in expr.free_symbols if str(s) in ("x", "y")})
-    value = sp.lambdify((x, y), expr, "numpy")
+    value = lambdify_numeric((x, y), expr)
     seeds = np.random.SeedSequence(seed).spawn(chunks)
     chunk_spectra, sums, squares, samples = [], 0.0, 0.0, 0
     for k in range(chunks):

@@ -226,10 +226,10 @@ def _run_forced(args, model, started, plan) -> int:
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
                              f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")
     for flag, value in (("--checkpoint", args.checkpoint), ("--scheduler", args.scheduler if args.scheduler
-                                                                    not in (None, "threads") else None)):
+                                                                    not in (None, "threads", "cuda") else None)):
         if value is not None:
             raise ParameterError(f"{flag} is not available for a forced model (its automaton runs on local "
-                                 "threads, without checkpoints); drop it")
+                                 "threads or --scheduler cuda, without checkpoints); drop it")
     if model.energy_expr is None:
         raise ModelError("the Monte Carlo of a forced model needs G(x) in closed form for H; sympy cannot "
                          f"integrate g = {model.g}")
@@ -254,6 +254,8 @@ def _run_forced(args, model, started, plan) -> int:
             histograms=histograms, joint=joint, stride=args.stride,
             chunk_paths=args.chunk_paths or default_chunk_paths(args.paths), max_path_steps=args.max_path_steps,
             phases=args.phases, period=period if args.phases else None,
+            **({"scheduler": "cuda", "precision": args.precision, "threads_per_block": args.threads_per_block}
+               if args.scheduler == "cuda" else {}),
         )
     for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
         print(f"vibro mc: warning: {text}", file=sys.stderr)
@@ -288,8 +290,9 @@ def _run_forced(args, model, started, plan) -> int:
                                     "ci": ens.phase_mean("x", k).ci} for k, tk in enumerate(ens.phase_times())]
     settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "engine": "simulate_automaton",
                 "scheme": args.scheme, "automaton_scheme": scheme,
-                "forcing": str(model.forcing), "scheduler": "threads",
-                "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
+                "forcing": str(model.forcing), "scheduler": args.scheduler or "threads",
+                "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"
+                if args.scheduler != "cuda" else "the same seed gives the same numbers on any launch configuration"}
     rec = record("mc", model=model, settings=settings, results=results, started=started)
     write_sidecar(args.out, rec)
     if args.joint:

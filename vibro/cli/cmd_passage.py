@@ -73,14 +73,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _csv(columns: dict) -> str:
-    import numpy as np
-
-    names = list(columns)
-    data = np.column_stack([np.asarray(columns[k], dtype=float).ravel() for k in names])
-    return "\n".join([",".join(names)] + [",".join(f"{v:.17g}" for v in row) for row in data]) + "\n"
-
-
 def run(args) -> int:
     """Run ``vibro passage``; bad input raises a VibroError (exit status 2)."""
     import math
@@ -89,7 +81,7 @@ def run(args) -> int:
     from vibro.passage import first_passage
     from vibro.provenance import record, sidecar_path, write_sidecar
 
-    from .common import model_from_args, output_plan
+    from .common import csv_text, model_from_args, output_plan
 
     if args.steps < 10 or args.steps > 10_000_000:
         raise ParameterError(f"--steps {args.steps} must lie in 10..1e7")
@@ -127,7 +119,7 @@ def run(args) -> int:
     columns["density"] = r.density
     if r.poisson is not None:
         columns["R_poisson"] = r.poisson
-    atomic_write_text(args.out, _csv(columns))
+    atomic_write_text(args.out, csv_text(columns))
     results = {"mean_time": r.mean_time if math.isfinite(r.mean_time) else None, "error_estimate": r.error_estimate,
                "decay_rate": r.decay_rate if math.isfinite(r.decay_rate) else None}
     if "ci" in r.details:

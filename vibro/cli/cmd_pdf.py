@@ -8,7 +8,7 @@ import argparse
 from hybrid.errors import ParameterError
 from hybrid.io import atomic_write_text
 
-from .common import phases_path
+from .common import csv_text, phases_path
 
 
 def register(subparsers) -> None:
@@ -48,9 +48,9 @@ def register(subparsers) -> None:
     p.add_argument("--tol", type=float, default=PDF_TOL,
                    help=f"--method auto: target L1 distance of p(H) on 40 bins (default {PDF_TOL})")
     p.add_argument("--grid", type=int, nargs=2, default=None, metavar=("N1", "N2"),
-                   help="--method fpk: energy rings and angle cells per ring (default 160 192; 120 128 for a forced "
-                        "model), or with the Cartesian scheme cells in x and in y (default 120 120); cost ~ N1 x N2 "
-                        "(a sparse LU)")
+                   help="--method fpk: energy rings and angle cells per ring (default 160 192), or with the "
+                        "Cartesian scheme cells in x and in y (default 120 120; 60 120 for a forced model, which "
+                        "uses Cartesian cells unless --scheme rings); cost ~ N1 x N2 (a sparse LU)")
     p.add_argument("--scheme", choices=("auto", "rings", "cartesian"), default="auto",
                    help="--method fpk: energy-angle rings (single well) or Cartesian cells (any number of wells, "
                         "e.g. a double-well Duffing with a < 0); auto (default) picks rings for a single well")
@@ -60,12 +60,12 @@ def register(subparsers) -> None:
     p.add_argument("--phases-out", default=None, metavar="FILE",
                    help="CSV of the phase-resolved densities (observable,phase,t_phase,lo,hi,density; default: OUT "
                         "with _phases before the suffix)")
-    p.add_argument("--steps", type=int, default=64,
-                   help="--method fpk, forced models: BDF2 time steps per forcing period (rounded up to a multiple of "
-                        "--phases); cost ~ steps")
+    p.add_argument("--steps", type=int, default=32,
+                   help="--method fpk, forced models: time steps per forcing period (Crank-Nicolson at this and twice "
+                        "as many steps, combined: fourth order; rounded up to a multiple of --phases); cost ~ steps")
     p.add_argument("--extrapolate", action="store_true",
-                   help="--method fpk, forced models: also solve on the grid twice coarser and combine the two "
-                        "(Richardson): ~2.5x smaller error for ~1.3x the time")
+                   help="--method fpk, forced models: combine the grid with the grid twice coarser (Richardson, "
+                        "second order): for --scheme rings, ~2.5x smaller error for ~1.3x the time")
     p.add_argument("--bins", type=int, default=400, help="--phases: bins of H on [0, h-max], as vibro mc")
     p.add_argument("--xy-bins", type=int, nargs=2, default=(80, 80), metavar=("NX", "NY"),
                    help="--phases: bins of x and y, as vibro mc")
@@ -92,15 +92,6 @@ _MAX_POINTS = 10_000_000  # stationary_density's own limit
 _BYTES_PER_POINT = 8 * 12  # the output arrays, the jump chain's grid arrays and the CSV text, about
 _MAX_JOINT_CELLS = 10_000**2
 _BYTES_PER_CELL = 8 * 8 + 60  # meshgrid, energies, density, and one CSV line
-
-
-def _csv(columns: dict) -> str:
-    import numpy as np
-
-    names = list(columns)
-    data = np.column_stack([np.asarray(columns[k], dtype=float).ravel() for k in names])
-    lines = [",".join(names)] + [",".join(f"{v:.17g}" for v in row) for row in data]
-    return "\n".join(lines) + "\n"
 
 
 def _check_resolved(args, sd, joint=None) -> None:
@@ -138,7 +129,7 @@ def _run_forced(args, model, plan) -> int:
 
     import numpy as np
 
-    from averaging.phase_plane.forced import FORCED_GRID, periodic_density_xy
+    from averaging.phase_plane.forced import PLANES, periodic_density_xy
     from vibro.provenance import noise_assumption, record, sidecar_path, write_sidecar
 
     started = time.perf_counter()
@@ -148,9 +139,10 @@ def _run_forced(args, model, plan) -> int:
         raise ParameterError(f"--bins {args.bins} and --xy-bins {args.xy_bins[0]} {args.xy_bins[1]} must be >= 1")
     if args.phases:
         plan.file(phases_path(args), "--phases-out", sidecar=True)
-    grid = _grid(args, FORCED_GRID)
-    sol = periodic_density_xy(model, grid=grid, h_max=args.h_max, steps=args.steps, phases=args.phases or None,
-                              points=args.points, extrapolate=args.extrapolate)
+    cells = "rings" if args.scheme == "rings" else "cartesian"
+    grid = _grid(args, PLANES[cells][1])
+    sol = periodic_density_xy(model, grid=grid, h_max=args.h_max, cells=cells, steps=args.steps,
+                              phases=args.phases or None, points=args.points, extrapolate=args.extrapolate)
     sd = sol.mean
     _check_resolved(args, sd)
     if args.joint is not None:
@@ -176,24 +168,25 @@ def _run_forced(args, model, plan) -> int:
                                                          hi if math.isfinite(hi) else span, args.xy_bins[0]),
                 "y": (-y_hi, y_hi, args.xy_bins[1])}
         phase_table = sol.phase_to_pandas(args.phases, bins)
-    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    atomic_write_text(args.out, csv_text({"H": sd.H, "p": sd.p}))
     written = [args.out]
     if args.joint is not None:
-        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+        atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
         written.append(args.joint)
     if phase_table is not None:
         atomic_write_text(phases_path(args), phase_table.to_csv(index=False, float_format="%.17g"))
         written.append(str(phases_path(args)))
     results = {"mean_energy": sol.mean_energy, "impact_rate": sol.impact_rate, "mean_x2": sd.mean_x2,
                "prob_below_barrier": sd.prob_below_barrier, "periodicity": sol.periodicity,
-               "conservation": sol.conservation, "gmres_iterations": sol.iterations}
+               "conservation": sol.conservation, "gmres_iterations": sol.iterations,
+               "error_estimate": sol.error_estimate, "time_correction": sol.time_correction}
     if args.phases:
         times = sol.phase_times(args.phases)
         results["phase_mean_energy"] = [{"t_phase": float(t), "value": float(v)}
                                         for t, v in zip(times, sol.mean_energy_at(times))]
         results["phase_impact_rate"] = [{"t_phase": float(t), "value": float(v)}
                                         for t, v in zip(times, sol.impact_rate_at(times))]
-    settings = {"method": "fpk", "h_max": args.h_max, "points": args.points, "grid": list(grid),
+    settings = {"method": "fpk", "cells": cells, "h_max": args.h_max, "points": args.points, "grid": list(grid),
                 "steps": len(sol.times), "period": sol.period, "forcing": str(model.forcing), "phases": args.phases,
                 "extrapolate": args.extrapolate}
     rec = record("pdf", model=model, settings=settings, results=results, started=started)
@@ -207,6 +200,8 @@ def _run_forced(args, model, plan) -> int:
           f"period {sol.period:.10g}, {len(sol.times)} steps, {sol.iterations} period maps)")
     print(f"noise: {noise_assumption(model)['text']}")
     print(f"time-averaged E[H] = {sol.mean_energy:.8g}   impact rate = {sol.impact_rate:.8g}")
+    print(f"estimated L1 error of p(H | t): {sol.error_estimate:.2g} (grid {tuple(grid)} against the grid twice "
+          "coarser)")
     if args.phases:
         print("   phase   t_phase     E[H | t]     impact rate at t")
         for k, (t, e, r) in enumerate(zip(times, sol.mean_energy_at(times), sol.impact_rate_at(times))):
@@ -318,9 +313,9 @@ def run(args: argparse.Namespace) -> int:
         pxy = sd.joint(x, y)
         _check_resolved(args, sd, (x, y, pxy))
         X, Y = np.meshgrid(x, y)
-    atomic_write_text(args.out, _csv({"H": sd.H, "p": sd.p}))
+    atomic_write_text(args.out, csv_text({"H": sd.H, "p": sd.p}))
     if args.joint is not None:
-        atomic_write_text(args.joint, _csv({"x": X, "y": Y, "p": pxy}))
+        atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
     from averaging.quadrature import geometry
 
     Gd = geometry(model).G_delta  # the lowest impact level (inf without walls)

@@ -26,13 +26,16 @@ def register(subparsers) -> None:
         "solve", help="stationary p(H) by the cheapest method whose estimated error meets --tol (exact, paper, jump, "
                       "chain, fpk or Monte Carlo), with the estimate after the run",
         description="Consider, cheapest first: exact (the elastic Gibbs density, when impacts are elastic at every "
-                    "reachable speed, the damping linear and the noise additive); paper, jump and chain (energy-"
-                    "envelope averaging: the impact loss as a drift, as Poisson-timed jumps, or as jumps once per "
-                    "flight; milliseconds to 0.1 s), each with a rating of its L1 error measured against the phase-"
+                    "reachable speed, the damping linear and the noise additive); chain, paper and jump (energy-"
+                    "envelope averaging: the impact loss as jumps once per flight, as a drift, or as Poisson-timed "
+                    "jumps; milliseconds to 0.1 s; paper and jump are checked against the chain after the run, so "
+                    "the chain comes first), each with a rating of its L1 error measured against the phase-"
                     "plane solver over a sweep of models (benchmarks/method_ratings.py; not rated outside it); fpk "
                     "(the full (x, y) Fokker-Planck equation with impacts as boundary conditions, 0.1-2 s, on the "
-                    "coarsest grid predicted to meet --tol, with its own three-grid error estimate); Monte Carlo only "
-                    "where none of these applies (forced or multi-well models; dt and paths planned from the "
+                    "coarsest grid predicted to meet --tol, with its own three-grid error estimate; on Cartesian "
+                    "cells for a potential with several wells, linear damping and additive noise, with a two-grid "
+                    "estimate, L1 then on [min G, h_max]); Monte Carlo only where none of these applies (forced "
+                    "models, several wells with nonlinear damping; dt and paths planned from the "
                     "scheme's bias constant and a pilot run). Runs the cheapest one predicted to meet --tol, then "
                     "reports the error estimated after the run and how it was made; when that misses --tol it "
                     "escalates (a finer fpk grid, or the next method). L1 is measured on 40 bins of [0, h_max].",
@@ -82,9 +85,13 @@ def run(args) -> int:
     if args.dry_run:
         if args.method != "auto":
             raise ParameterError("--dry-run reports the automatic choice; drop --method")
+        from hybrid.errors import ModelError
         from vibro.solve import diagnose
 
-        diag = diagnose(model, args.h_max)
+        try:
+            diag = diagnose(model, args.h_max)
+        except ModelError:  # no averaging (several wells, forcing): choose says what applies instead
+            diag = None
         print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False,
                      diagnostics=diag).summary())
         return 0
@@ -106,7 +113,7 @@ def run(args) -> int:
                       for k, v in sol.choice.predictions.items())
     print(f"predicted L1 of the candidates: {preds}")
     if args.out is not None:
-        from hybrid.io import write_csv_atomically
+        from hybrid.io import atomic_write_text
         from hybrid.resolution import check_density
         from vibro.provenance import record, write_sidecar
 
@@ -118,7 +125,9 @@ def run(args) -> int:
             check_density(f"p(H) in {args.out}", [sol.H], sol.p, sampled_on=[sol.H], mass=1.0,
                           hint=lambda spreads: "", refine="use vibro pdf with more --points")
 
-        path = write_csv_atomically(sol.to_pandas(), args.out)
+        from .common import csv_text
+
+        path = atomic_write_text(args.out, csv_text({"H": sol.H, "p": sol.p}))
         results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,
                    "estimated_error": sol.estimated_error, "estimate_source": sol.estimate_source,
                    "predictions": sol.choice.predictions,

@@ -229,9 +229,6 @@ def run(args, resolved, plan) -> int:
     if args.joint:
         raise ParameterError("--joint is for oscillator models; automaton models write their observables' "
                              "histograms (--observable, --range)")
-    if args.scheduler == "cuda":
-        raise ParameterError("--scheduler cuda: automaton models run on threads or Dask (the CUDA kernel is the "
-                             "oscillator's)")
     if getattr(args, "phases", 0):
         # an automaton declares no forcing period: sections at a guessed period would be silently wrong
         raise ParameterError("--phases needs a forced oscillator model (duffing-forced, or forcing= in a model file); "
@@ -270,6 +267,8 @@ def run(args, resolved, plan) -> int:
                                  max_path_steps=args.max_path_steps, scheduler=args.scheduler,
                                  checkpoint=args.checkpoint, resume=args.resume,
                                  checkpoint_every=args.checkpoint_every, events=args.events,
+                                 **({"precision": args.precision, "threads_per_block": args.threads_per_block}
+                                    if args.scheduler == "cuda" else {}),
                                  **({"phases": args.snapshots, "period": args.t_end} if args.snapshots else {}))
     notes = [f"{w.category.__name__}: {w.message}" for w in caught]
     if scheme not in ("splitting", "symplectic", "baoab"):
@@ -352,7 +351,8 @@ def run(args, resolved, plan) -> int:
     settings = {**{k: v for k, v in ens.settings.items() if k != "automaton"}, "scheme_requested": args.scheme,
                 "x0": list(x0),
                 "observables": {k: str(v) for k, v in obs.items()}, "engine": "simulate_automaton",
-                "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"}
+                "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"
+                if args.scheduler != "cuda" else "the same seed gives the same numbers on any launch configuration"}
     description = automaton.describe() if hasattr(automaton, "describe") else describe_automaton(automaton)
     if base is not None and not args.filter:  # a filtered model carries its base model already
         description["oscillator"] = base

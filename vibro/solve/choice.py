@@ -5,14 +5,17 @@
 1. **exact**: the impacts are elastic at every *reachable* impact speed (law elastic, or V_C so high that the
    stationary impact-speed tail P(|v| > V_C) under the elastic density is below tol/10), the damping is linear
    (h = c*y) and the noise additive. Then p(H) is proportional to T(H) exp(-2cH/sigma**2), exactly.
-2. **paper**, **jump**, **chain** (energy-envelope averaging; milliseconds, about 0.1 s for chain): their error is
+2. **chain**, **paper**, **jump** (energy-envelope averaging; milliseconds, about 0.1 s for chain; paper and jump
+   are checked against the chain after the run, so the chain, the most accurate, is also the cheapest): their error is
    rated against the phase-plane solver over a sweep of models (``benchmarks/method_ratings.py``, per wall
    family: symmetric, asymmetric, one-sided, equilibrium; self-excited damping included). A method is a candidate
    where a rating covers the model (:func:`~vibro.solve.errormodel.rating`), and chosen when its rating meets tol.
 3. **fpk**, the phase-plane solver of the full (x, y) problem, on the coarsest grid of :data:`FPK_GRIDS` predicted
    to meet tol; it carries its own a-posteriori estimate (three grids), so it is the method for models no rating
-   covers, and :func:`~vibro.solve.solve` refines its grid when the estimate misses.
-4. **Monte Carlo** only where no deterministic method applies (a forced or multi-well model), planned by
+   covers, and :func:`~vibro.solve.solve` refines its grid when the estimate misses. A potential with several
+   wells (linear damping, additive noise) gets fpk on Cartesian cells (:func:`multiwell_choice`).
+4. **Monte Carlo** only where no deterministic method applies (a forced model, several wells with nonlinear
+   damping or multiplicative noise), planned by
    :mod:`vibro.solve.planner`.
 
 Averaging is refused only where no rating covers the model and the 90th-percentile energy loses more than
@@ -181,7 +184,25 @@ FPK_PREDICT_ORDER = 1.75
 """Order by which fpk's estimate is predicted to fall with the grid (fitted on Fig. 2, benchmarks/fpk_convergence.py);
 the run's own estimate decides, and a miss refines the grid."""
 COSTS = {"exact": 0.02, "paper": 0.05, "jump": 0.05, "chain": 0.15}
-"""Wall time (s) of each averaging density at 2000 points (the diagnostics already spent), for ordering."""
+"""Wall time (s) of each averaging density at 2000 points (the diagnostics already spent)."""
+CROSS_CHECKED = ("paper", "jump")
+"""Averaging methods whose result ``solve`` checks against the chain after the run (so they cost the chain too)."""
+
+
+def method_cost(name: str) -> float:
+    """Wall time (s) of averaging method ``name`` in ``solve``: its density, plus the chain's for the a-posteriori
+    cross-check of ``paper`` and ``jump``; so the chain, the most accurate of the three, is never the dearer.
+
+    Examples
+    --------
+    >>> method_cost("chain") < method_cost("jump")
+    True
+    """
+    return COSTS[name] + (COSTS["chain"] if name in CROSS_CHECKED else 0.0)
+
+
+AVERAGING_ORDER = tuple(sorted(("paper", "jump", "chain"), key=method_cost))
+"""The averaging methods, cheapest (in ``solve``, cross-check included) first."""
 
 
 def fpk_grid_for(tol: float, start=None) -> tuple[int, int]:
@@ -248,6 +269,9 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     try:
         diag = diagnostics if diagnostics is not None else diagnose(model)
     except ModelError as exc:
+        several = multiwell_choice(model, tol, str(exc))
+        if several is not None:
+            return several
         return mc_choice(model, tol, None, f"no deterministic method applies ({exc})", {}, max_cost, mc_pilot, seed)
     preds = {}
     reasons = []
@@ -269,11 +293,11 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
         reasons.append("no rating of the averaging methods covers this model (its wall family, noise or loss "
                        "ratios lie outside the sweep of benchmarks/method_ratings.py)")
     else:
-        for name in ("paper", "jump", "chain"):  # cheapest first
+        for name in AVERAGING_ORDER:  # cheapest first
             if preds[name] <= tol:  # False for NaN (not rated)
                 why = (f"its rating against fpk ({_family(diag)} walls, impacts lose {diag.r_imp:.3f} H and damping "
                        f"{diag.r_damp:.3f} H per cycle) is {preds[name]:.3g} <= tol")
-                return Choice(name, why, preds[name], COSTS[name], {}, preds, diag)
+                return Choice(name, why, preds[name], method_cost(name), {}, preds, diag)
         rated = ", ".join(f"{n} {preds[n]:.3f}" for n in ("paper", "jump", "chain") if math.isfinite(preds[n]))
         reasons.append(f"no averaging method is rated within tol={tol:g} ({rated})")
     grid = fpk_grid_for(tol)
@@ -286,6 +310,50 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     why = "; ".join(reasons) + (f"; the phase-plane FPK solver (impacts as boundary conditions) on grid {grid} "
                                 "carries its own three-grid error estimate")
     return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
+
+
+def multiwell_choice(model, tol: float, why: str) -> Choice | None:
+    """fpk on Cartesian cells for an autonomous model whose potential has several wells, or None.
+
+    The energy-envelope methods and fpk's rings need one well (one closed orbit per energy); the Cartesian
+    discretisation of :mod:`averaging.phase_plane.cartesian` does not. It is chosen where the damping is linear and
+    the noise additive (then exp(-beta H), beta = 2c/sigma**2, bounds the tail, so the energy range is known before
+    the run: up to 14/beta, fitted down to the mass by the solver); its two-grid estimate is checked after the run
+    and the grid refined while it misses. Energies start at min G (negative between the wells of a double well),
+    so the L1 bins cover [min G, h_max]. None (Monte Carlo) for other models, e.g. nonlinear damping.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> bistable = ImpactOscillator("-x + x**3/4", "c*y", parameters={"c": 1.0, "D": 0.5}, barriers=None)
+    >>> ch = multiwell_choice(bistable, 0.01, "not a single well")
+    >>> ch.method, ch.settings["scheme"], round(ch.settings["h_min"], 6)
+    ('fpk', 'cartesian', -1.0)
+    """
+    if model.is_forced:
+        return None
+    from averaging.phase_plane._cartesian import confining_range
+    from averaging.phase_plane.solver import is_single_well
+
+    c = model.linear_damping_constant()
+    s2 = model.constant_noise_intensity()
+    if is_single_well(model) or c is None or s2 is None or not (c > 0 and s2 > 0):
+        return None
+    h_max = 14.0 * s2 / (2.0 * c)
+    walls = [float(b) if math.isfinite(b) else None for b in model.barriers]
+    try:
+        _, _, g_min = confining_range(model.potential, h_max, *walls)
+    except ModelError:
+        return None
+    grid = fpk_grid_for(tol)
+    expected = fpk_typical() * (160.0 / grid[0]) ** FPK_PREDICT_ORDER
+    diag = Diagnostics(True, True, bool(model.restitution.is_elastic), math.nan, math.nan, math.nan, math.nan,
+                       math.nan, math.nan, h_max, math.nan, ["several wells: no averaging"], geometry="several wells")
+    reason = (f"the averaging methods and fpk's rings do not apply ({why}); the phase-plane FPK solver on Cartesian "
+              f"cells (any number of wells) on grid {grid} carries its own two-grid error estimate")
+    preds = {"exact": math.inf, "paper": math.inf, "jump": math.inf, "chain": math.inf, "fpk": expected}
+    return Choice("fpk", reason, expected, fpk_cost(grid),
+                  {"grid": grid, "scheme": "cartesian", "h_min": float(g_min), "h_max": h_max}, preds, diag)
 
 
 def _family(diag) -> str:

@@ -22,7 +22,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import sympy as sp
 
 from hybrid.errors import NormalisationError
 from models import Elastic
@@ -146,10 +145,9 @@ def cycle_quantities(model, H):
     """
     from averaging.methods import METHODS
     from averaging.quadrature import OrbitNodes, geometry
-    from models import X, Y
 
     H = np.atleast_1d(np.asarray(H, dtype=float))
-    h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
+    h = model._damping_numeric
     orbit = OrbitNodes(model, H)  # the averaging's singularity-free nodes (int w/s dx over the level)
     x, s = orbit.x, orbit.s
     hp = np.broadcast_to(np.asarray(h(x, s), dtype=float), x.shape)
@@ -162,13 +160,15 @@ def cycle_quantities(model, H):
     return W, T, loss
 
 
-def _reference_density(model, h_max, points=600):
+def _reference_density(model, h_max, points=600, cycles=None):
     """A cheap p(H) to weight the diagnostics: the paper's averaged density of the *elastic* model.
 
-    For linear damping and additive noise this is the exact elastic density T(H) exp(-beta H).
+    For linear damping and additive noise this is the exact elastic density T(H) exp(-beta H). ``cycles``, a dict,
+    receives the :func:`cycle_quantities` computed on the returned energies (so that :func:`diagnose` need not
+    compute them again).
     """
     H = np.linspace(h_max / points, h_max, points)
-    W, T, _ = cycle_quantities(model, H)
+    W, T, loss = cycle_quantities(model, H)
     c = model.linear_damping_constant()
     s2 = model.constant_noise_intensity()
     if c is not None and s2 is not None:
@@ -189,6 +189,8 @@ def _reference_density(model, h_max, points=600):
     logp -= logp.max()
     p = np.exp(logp)
     p /= _trapz(p, H)
+    if cycles is not None:
+        cycles.update(H=H, quantities=(W, T, loss))
     return H, p
 
 
@@ -198,9 +200,7 @@ def _trapz(y, x):
 
 def _feeds_energy(model, h_top: float) -> bool:
     """True when h(x, y) * y < 0 somewhere on the orbits up to energy ``h_top`` (negative damping)."""
-    from models import X, Y
-
-    h = sp.lambdify((X, Y), model.substitute(model.epsilon * model.h), "numpy")
+    h = model._damping_numeric
     lo, hi = model.turning_points(h_top)  # clipped to the walls, whichever side they are on
     left, right = float(lo), float(hi)
     x = np.linspace(left, right, 101)
@@ -219,19 +219,27 @@ def _choose_h_max(model, elastic: bool = True) -> float:
     s2 = model.constant_noise_intensity()
     if elastic and c is not None and s2 is not None and c > 0 and s2 > 0:
         return 14.0 * s2 / (2.0 * c)  # exp(-beta H) T(H): tail mass ~ e^-14 times a polynomial
+    # one averaged density over the widest range tried (the solver fits its grid to where the mass is), then the
+    # first of 4, 8, ..., 512 whose top tenth holds < 1e-5 of the mass below it: one solve instead of up to eight
+    import warnings
+
+    from averaging import stationary_density
+    from hybrid.errors import TruncationWarning
+
+    target = model.with_restitution(Elastic()) if elastic else model
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TruncationWarning)  # mass beyond the widest range: refused below
+        sd = stationary_density(target, method="paper", h_max=4.0 * 2.0**7, points=4000)
+    H, p = np.asarray(sd.H, dtype=float), np.asarray(sd.p, dtype=float)
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(H))])
     h_max = 4.0
     for _ in range(8):
-        if elastic:
-            H, p = _reference_density(model, h_max)
-        else:
-            from averaging import stationary_density
-
-            sd = stationary_density(model, method="paper", h_max=h_max, points=600)
-            H, p = np.asarray(sd.H, dtype=float), np.asarray(sd.p, dtype=float)
-        tail = _trapz(p[-len(p) // 10:], H[-len(H) // 10:])
+        below = float(np.interp(h_max, H, cum))
+        tail = (below - float(np.interp(0.9 * h_max, H, cum))) / below if below > 0 else 1.0
         if tail < 1e-5:
             return h_max
         h_max *= 2.0
+    h_max /= 2.0
     raise NormalisationError(
         f"the stationary p(H) still has mass {tail:.3g} near H = {h_max:g}: energy grows without bound, "
         "so there is no stationary density to approximate (check the damping sign and the noise intensity)"
@@ -272,9 +280,10 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     law = model.restitution
     vc = float(law.elastic_below()) if model.has_barriers else math.inf
     elastic = bool(law.is_elastic) or not model.has_barriers
+    cycles: dict = {}
     try:
         h_el = _choose_h_max(model)
-        He, pe = _reference_density(model, h_el)
+        He, pe = _reference_density(model, h_el, cycles=cycles)
     except NormalisationError:
         if elastic:
             raise
@@ -320,7 +329,7 @@ def diagnose(model, h_max: float | None = None) -> Diagnostics:
     if h_max is None:
         h_max = float(min(h_el, 1.15 * H[min(int(np.searchsorted(cdf, 1.0 - 1e-5)), len(H) - 1)]))
     h_max = float(h_max)
-    W, T, loss = cycle_quantities(model, H)
+    W, T, loss = cycles["quantities"] if cycles.get("H") is H else cycle_quantities(model, H)
     r_imp = _trapz(p * loss / H, H)
     r_damp = _trapz(p * W / H, H)
     i90 = min(int(np.searchsorted(cdf, 0.9)), len(H) - 1)

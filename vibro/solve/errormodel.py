@@ -66,6 +66,35 @@ RATING_FAMILIES = {"none": "symmetric", "symmetric": "symmetric", "asymmetric": 
 """The wall family whose rating applies to each barrier geometry (no walls: the symmetric family's)."""
 
 
+RATING_FEATURES = ("log_r_imp", "log_r_damp", "self_excited", "linear_damping", "quasi_linear_log_r_imp",
+                   "quasi_linear_log_r_damp")
+"""What a rating's ``coef`` multiplies (:func:`rating_features`), after the family's ``log_scale``."""
+RATING_SHIFT = 1e-4
+"""Added to r_imp and r_damp before their logarithm (a ratio of 0 stays finite)."""
+
+
+def rating_features(r_imp: float, r_damp: float, self_excited: bool, linear_damping: bool) -> tuple:
+    """The features of :data:`RATING_FEATURES` (the quasi-linear class: linear damping, not self-excited).
+
+    Examples
+    --------
+    >>> [round(v, 3) for v in rating_features(0.1, 0.2, False, True)]
+    [-2.302, -1.609, 0.0, 1.0, -2.302, -1.609]
+    """
+    li, ld = math.log(r_imp + RATING_SHIFT), math.log(r_damp + RATING_SHIFT)
+    quasi_linear = float(bool(linear_damping) and not self_excited)
+    return li, ld, float(bool(self_excited)), float(bool(linear_damping)), quasi_linear * li, quasi_linear * ld
+
+
+def _exponents(r: dict, diag: Diagnostics) -> tuple[float, float]:
+    """The rating's power of (r_imp + shift) and of (r_damp + shift) for this model's class."""
+    if "coef" not in r:  # the per-family power law of earlier ratings
+        return r["exp_imp"], r["exp_damp"]
+    c = r["coef"]
+    quasi_linear = bool(diag.linear_damping) and not diag.self_excited
+    return c[0] + (c[4] if quasi_linear else 0.0), c[1] + (c[5] if quasi_linear else 0.0)
+
+
 def rating(method: str, diag: Diagnostics) -> dict | None:
     """The fitted rating of ``method`` that covers this model, or None where none does.
 
@@ -93,7 +122,7 @@ def _rated_features(r: dict, diag: Diagnostics):
     the power law only grows with the distance (below the lowest r_imp for a positive exponent, ...), the box's
     edge is taken: the rating there bounds the model's from above."""
     out = []
-    for name, exponent in (("r_imp", r["exp_imp"]), ("r_damp", r["exp_damp"])):
+    for name, exponent in zip(("r_imp", "r_damp"), _exponents(r, diag)):
         lo, hi = r["rated_box"][name]
         v = float(getattr(diag, name))
         if lo <= v <= hi:
@@ -111,7 +140,7 @@ def predict_averaging_error(method: str, diag: Diagnostics) -> float:
     """Predicted L1 error of p(H) (40 bins) of ``method`` for a model with these diagnostics.
 
     ``paper``, ``jump``, ``chain``: the rating fitted against fpk over the sweep (:func:`rating`: an upper quantile,
-    exp(log_scale) (r_imp + shift)**exp_imp (r_damp + shift)**exp_damp), NaN where no rating covers the model.
+    exp(log_scale + coef . :func:`rating_features`)), NaN where no rating covers the model.
     ``exact``: the Gibbs formula's error from the neglected inelastic tail (inf without linear damping and additive
     noise). ``fpk``: the upper quantile of its own estimate at the default grid over the sweep (``solve`` reports
     the run's estimate). ``exact-two-impact``: the older fit against Monte Carlo on symmetric gaps (NaN elsewhere).
@@ -136,6 +165,9 @@ def predict_averaging_error(method: str, diag: Diagnostics) -> float:
         if r is None:
             return math.nan
         r_imp, r_damp = _rated_features(r, diag)
+        if "coef" in r:
+            x = rating_features(r_imp, r_damp, diag.self_excited, diag.linear_damping)
+            return math.exp(r["log_scale"] + sum(c * v for c, v in zip(r["coef"], x)))
         return math.exp(r["log_scale"]) * (r_imp + r["shift"]) ** r["exp_imp"] * (r_damp + r["shift"]) ** r["exp_damp"]
     if getattr(diag, "geometry", "symmetric") not in AVERAGING_GEOMETRIES:
         return math.nan  # not measured on this geometry

@@ -11,7 +11,7 @@ import numpy as np
 
 from hybrid.errors import ModelError, ParameterError, VibroWarning
 
-from .choice import Choice, averaging_cost, check_request, choose, fpk_grid_for, mc_choice
+from .choice import Choice, averaging_cost, check_request, choose, fpk_grid_for, mc_choice, method_cost
 from .diagnostics import diagnose
 from .errormodel import L1_BINS, bias_constants, predict_averaging_error
 from .metrics import bin_masses, l1_between_histograms, rebin_counts
@@ -165,8 +165,10 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
     if choice.method == "monte-carlo" and not monte_carlo and not forced:
         raise ModelError(f"no deterministic method applies to this model ({choice.reason}); use vibro solve or "
                          "vibro mc")
+    if h_max is not None and choice.settings.get("scheme") == "cartesian":
+        choice.settings["h_max"] = float(h_max)  # the user's range (multiwell_choice saw no diagnostics)
     h_max = choice.settings.get("h_max", choice.diagnostics.h_max)
-    edges = np.linspace(0.0, h_max, L1_BINS + 1)
+    edges = np.linspace(choice.settings.get("h_min", 0.0), h_max, L1_BINS + 1)  # h_min < 0 between two wells
     if choice.method == "monte-carlo":
         from hybrid.stochastic import simulate_ensemble
 
@@ -241,8 +243,8 @@ def _escalate(choice: Choice, estimated: float, tol: float) -> Choice | None:
         want = grid[0] * (estimated / (0.7 * tol)) ** (1.0 / 1.3)
         finer = next((g for g in FPK_GRIDS if g[0] > grid[0] and g[0] >= want), FPK_GRIDS[-1])
         return Choice("fpk", choice.reason + f"; the estimate {estimated:.3g} on grid {grid} missed tol, refined",
-                      estimated * (grid[0] / finer[0]) ** 1.3, fpk_cost(finer), {"grid": finer}, preds,
-                      choice.diagnostics)
+                      estimated * (grid[0] / finer[0]) ** 1.3, fpk_cost(finer), {**choice.settings, "grid": finer},
+                      preds, choice.diagnostics)
     if choice.method not in LADDER:
         return None
     for name in LADDER[LADDER.index(choice.method) + 1:]:
@@ -252,7 +254,7 @@ def _escalate(choice: Choice, estimated: float, tol: float) -> Choice | None:
                           preds.get("fpk", math.nan), fpk_cost(grid), {"grid": grid}, preds, choice.diagnostics)
         if preds.get(name, math.nan) <= tol:
             return Choice(name, choice.reason + f"; {choice.method}'s estimate {estimated:.3g} missed tol",
-                          preds[name], averaging_cost(), {}, preds, choice.diagnostics)
+                          preds[name], method_cost(name), {}, preds, choice.diagnostics)
     return None
 
 
@@ -266,6 +268,14 @@ def _run_deterministic(model, choice: Choice, h_max: float, edges, points: int, 
         from averaging.phase_plane import stationary_density_xy
 
         grid = tuple(choice.settings.get("grid", (160, 192)))
+        if choice.settings.get("scheme") == "cartesian":  # several wells (multiwell_choice)
+            from averaging.phase_plane import GridWarning
+            from averaging.phase_plane.cartesian import stationary_density_cartesian
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", GridWarning)  # its 100-bin warning is not solve's tolerance
+                sd = stationary_density_cartesian(model, grid=grid, h_max=h_max, points=points, tol=2.0)
+            return sd, sd.estimate_error(edges), f"fpk on Cartesian cells {grid}: " + sd.error_method
         with warnings.catch_warnings():
             # solve checks the estimate on its own bins and escalates; the 100-bin GridWarning is not its tolerance
             from averaging.phase_plane import GridWarning

@@ -1,0 +1,680 @@
+"""The ``cuda`` scheduler of automaton ensembles: the automaton generator's own step code on an NVIDIA GPU.
+
+The device module is printed by :func:`hybrid.stochastic._auto_codegen.generate_source` itself, from the same
+pieces as the CPU kernel: the model's functions (drift, noise, guards, resets, observables), the event code
+(``crosses``, ``locate``, ``event_step``, the velocity sub-steps) and the straight-line fast step of each mode, with
+their decorators turned into ``cuda.jit(device=True)``. Only the loop around them differs (:data:`_KERNEL`):
+
+* **One thread per path; counter-based normals.** Normal number q = step * M + k of path i (M noises) is half of
+  the Philox-4x32-10 draw at counter (q // 2, i) under the seed's key, by Box-Muller
+  (:mod:`hybrid.stochastic._cuda_rng`). Nothing depends on the block size, the grid or where a launch starts, so
+  every number is bitwise the same for any launch configuration and across a checkpoint and resume; and the host
+  can compute the same normals (the tests drive the CPU kernel with them and find the same paths).
+* **Histograms.** Each block counts into one flat ``cuda.shared.array`` of int32 cells with shared atomics (the
+  speeds at the firings, the observables, the joint histogram, the phase sections, in that order, as far as they
+  fit in 48 KiB; the rest goes straight to global memory) and adds it once per launch into the global int64 cells.
+  Integer atomics give the same sums in any order.
+* **Per-path rows.** Each thread keeps its path's state, mode, counters and sums in registers and local memory and
+  stores them in one row per path after each launch; the host adds the rows of each chunk of ``chunk_paths`` paths
+  in path order, so that the ensemble has the same per-chunk rows, and batch-means intervals, as on the CPU.
+* **Launches and checkpoints.** The steps are cut into launches of ``launch_steps``; every ``checkpoint_every``
+  launches the rows and histograms go to the automaton checkpoint file (checksummed, tied to the run's identity,
+  which for CUDA also names the generator and the precision), and ``resume`` continues from the saved step.
+* **Precision.** Double by default; ``precision='f32'`` types every float literal of the module as float32 (the
+  state, the step and the normals in single precision); counters, the sums of observables and the speed sums stay
+  int64 and float64.
+
+With ``NUMBA_ENABLE_CUDASIM=1`` (set before numba is imported) the kernel runs on numba's CUDA simulator, which is
+how the tests run without a GPU. Without numba-cuda or a device, :class:`~hybrid.errors.CudaUnavailableError` says
+what to do in one line.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import time
+import types
+from pathlib import Path
+
+import numpy as np
+
+from hybrid.errors import CudaUnavailableError, ModelError, ParameterError
+
+from . import _auto_codegen, _auto_exec, _codegen, _cuda_rng
+
+RNG = "philox4x32-10 box-muller, counter (step*M+k)//2, path"
+PRECISIONS = ("f64", "f32")
+SHARED_CELLS = 12 * 1024
+"""int32 cells of a block's shared histograms (48 KiB, the static shared memory of one block)."""
+INSTALL_HINT = 'pip install -e ".[cuda]"'
+MAX_LAUNCH_STEPS = 2**24
+
+
+# ---------------------------------------------------------------------------------------------------- availability
+def simulator_enabled() -> bool:
+    """True when numba runs CUDA kernels on its simulator (``NUMBA_ENABLE_CUDASIM=1`` before numba's import)."""
+    from numba.core import config
+
+    return bool(config.ENABLE_CUDASIM)
+
+
+def require_cuda():
+    """``numba.cuda`` when a device (or the simulator) can run kernels, else :class:`CudaUnavailableError`.
+
+    A real device needs the numba-cuda package (numba's own ``numba.cuda`` is deprecated); the simulator of either
+    is accepted.
+
+    Examples
+    --------
+    >>> try:
+    ...     require_cuda()
+    ... except CudaUnavailableError as e:
+    ...     assert "\\n" not in str(e)
+    """
+    try:
+        from numba import cuda
+    except ImportError:
+        raise CudaUnavailableError(
+            f"scheduler='cuda' needs numba-cuda, which is not installed: {INSTALL_HINT}"
+        ) from None
+    if simulator_enabled():
+        return cuda
+    if getattr(cuda, "implementation", "") != "NVIDIA":
+        raise CudaUnavailableError(
+            f"scheduler='cuda' needs the numba-cuda package (numba's built-in CUDA target is not supported): "
+            f"{INSTALL_HINT}"
+        )
+    try:
+        ok = cuda.is_available()
+    except Exception:  # a broken driver install raises instead of answering False
+        ok = False
+    if not ok:
+        raise CudaUnavailableError(
+            "scheduler='cuda': no CUDA device was found (numba.cuda.is_available() is False); run on a machine with "
+            "an NVIDIA GPU and driver, or set NUMBA_ENABLE_CUDASIM=1 for numba's (slow) simulator"
+        )
+    return cuda
+
+
+# ---------------------------------------------------------------------------------------------------- generation
+_PRELUDE = '''\
+# Generated for the device by hybrid.stochastic._auto_cuda from the automaton generator's own pieces
+# (hybrid.stochastic._auto_codegen): precision {precision}. Do not edit: the file name hashes this text.
+from numba import cuda, float32, float64, int32, int64
+
+from hybrid.stochastic._cuda_rng import device_normal_pair
+
+normal_pair = device_normal_pair("{precision}")
+_fty = {ftype}
+SH = {shared}  # cells of the block-shared copy of the histograms: a prefix of the layout below
+VW = {vw}  # the layout of the flat histogram cells: speeds (transition, bin) first, then
+H_OFF = {h_off}  # the observables (observable, bin),
+WIDTH = {width}
+J_OFF = {j_off}  # the joint histogram (y bin, x bin),
+NX = {nx}
+P_OFF = {p_off}  # the phase sections (section, observable, bin)
+CELLS = {cells}
+'''
+
+_KERNEL = '''\
+@cuda.jit(device=True, inline=True)
+def count(sh, gh, i):
+    # one histogram cell: in the block's shared copy when it lies there, else straight into the global cells
+    if i < SH:
+        cuda.atomic.add(sh, i, 1)
+    else:
+        cuda.atomic.add(gh, i, 1)
+
+
+@cuda.jit({jit_options})
+def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale, obs_bins, jx, jy, j_lo, j_scale,
+            j_bins, v_scale, v_bins, track, n_phase, phase_steps, XS, MS, CNT, SM, PSM, IWS, FWS, elogs, gh):
+    """Steps [n0, n1) of paths 0 .. npath-1, one thread each; every path's row in XS .. FWS in and out."""
+    sh = cuda.shared.array(SH, int32)
+    tid = cuda.threadIdx.x
+    nthr = cuda.blockDim.x
+    for _i in range(tid, SH, nthr):
+        sh[_i] = 0
+    cuda.syncthreads()
+    ip = cuda.grid(1)
+    sdt = math.sqrt(dt)
+    hdt = _fty(0.5) * dt
+{unpack}
+    if ip < npath:  # no early return: every thread reaches the barriers
+        x = cuda.local.array(N, _fty)
+        ws = cuda.local.array(WORK, _fty)
+        dw = cuda.local.array(M, _fty)
+        ob = cuda.local.array(N_OBS, _fty)
+        iw = cuda.local.array(IW, int64)
+        fw = cuda.local.array(FW, float64)
+        counts = cuda.local.array(6, int64)
+        for _i in range(IW):
+            iw[_i] = IWS[ip, _i]
+        for _i in range(FW):
+            fw[_i] = FWS[ip, _i]
+        for _i in range(6):
+            counts[_i] = CNT[ip, _i]
+        elog = elogs[ip]
+        mode = MS[ip]
+{rows_in}
+        _cs = (n0 - n_burn) % stride if n0 > n_burn else 0  # recorded steps since the last sample
+        _zp = np.uint64(0xFFFFFFFFFFFFFFFF)  # the Philox counter of the normals in _za, _zb (none yet)
+        _za = _fty(0.0)
+        _zb = _fty(0.0)
+        for step in range(n0, n1):  # body indented as the CPU lane loop, for its pieces
+                rec = step >= n_burn
+                t = t0 + _fty(step) * dt
+                _t1 = t0 + _fty(step + 1) * dt
+                phase_now = False
+                sample = False
+                if rec:
+                    phase_now = n_phase > 0 and (step + 1) % phase_steps == 0
+                    _cs += 1
+                    if _cs >= stride:
+                        _cs = 0
+                        sample = True
+{normals}
+{fast}
+                if _slow:  # a guard may have fired: the step again through the general event loop
+{to_array}
+{dw_store}
+                    mode = event_step(mode, x, t, _t1, dt, dw, p, rec, sh, v_scale, v_bins, track, iw, fw, ws, elog)
+{from_array}
+                    if sample and FAST_CHECKS_SET and outside(mode, x, _t1, p):
+                        counts[2] += 1
+                if not (phase_now or sample):
+                    continue
+{observe}
+                if phase_now:
+{to_ob}
+                    kp = ((step + 1) // phase_steps) % n_phase
+                    for o in range(N_OBS):
+                        v = ob[o]
+                        if v != v:
+                            continue
+                        PSM[ip, kp, o] += v
+                        b = (v - obs_lo[o]) * obs_scale[o]
+                        if b < 0.0:
+                            cell = 0
+                        elif b >= obs_bins[o]:
+                            cell = obs_bins[o] + 1
+                        else:
+                            cell = int(b) + 1
+                        count(sh, gh, P_OFF + (kp * N_OBS + o) * WIDTH + cell)
+                if not sample:
+                    continue
+                counts[0] += 1
+                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard
+{to_array}
+                    if outside(mode, x, _t1, p):
+                        counts[2] += 1
+{binning}
+                if jx >= 0:
+{to_ob}
+                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
+                    by = (ob[jy] - j_lo[1]) * j_scale[1]
+                    if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
+                        count(sh, gh, J_OFF + int(by) * NX + int(bx))
+                    else:
+                        counts[4] += 1
+{rows_out}
+        MS[ip] = mode
+        for _i in range(IW):
+            IWS[ip, _i] = iw[_i]
+        for _i in range(FW):
+            FWS[ip, _i] = fw[_i]
+        for _i in range(6):
+            CNT[ip, _i] = counts[_i]
+    cuda.syncthreads()
+    for _i in range(tid, SH, nthr):  # the block's shared cells into the global ones, once per launch
+        if sh[_i] != 0:
+            cuda.atomic.add(gh, _i, sh[_i])
+'''
+
+_CUDA_TEMPLATE = (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPLATE_EVENTS
+                  + _auto_codegen._TEMPLATE_OUTSIDE + _KERNEL)
+"""The device module: the generator's header (constants, the model's functions), its event code and its admissible
+set test, around the kernel above."""
+
+_DECORATOR = re.compile(r"^@nb\.njit\([^)]*\)$", re.M)
+_HIST = re.compile(r"^(\s*)hist\[(\d+), (.+)\] \+= 1$", re.M)
+_VHIST = re.compile(r"^(\s*)vhist\[best, (.+)\] \+= 1$", re.M)
+
+
+def _to_device(src: str) -> str:
+    """The CPU statements of the generated pieces that the device does otherwise: ``@nb.njit`` -> device functions,
+    per-chunk histogram increments -> atomics on the flat cells (shared where they fit)."""
+    if re.search(r"\b_user_law\b", src):
+        raise ModelError("scheduler='cuda' needs the restitution law as a sympy expression of v "
+                         "(CustomRestitution('...')); a Python callable cannot be compiled for the device")
+    src = _DECORATOR.sub("@cuda.jit(device=True)", src)
+    src = _HIST.sub(lambda m: f"{m[1]}count(sh, gh, H_OFF + {m[2]} * WIDTH + {m[3]})", src)
+    # the speeds' cells come first in the layout and always fit in the shared copy (event_step gets it as vhist)
+    src = _VHIST.sub(lambda m: f"{m[1]}cuda.atomic.add(vhist, best * VW + {m[2]}, 1)", src)
+    left = [line.strip() for line in src.splitlines()
+            if re.search(r"\b(nb\.|hist\[|vhist\[|jhist\[|phist\[|np\.empty|np\.zeros)", line)]
+    if left:
+        raise ModelError(f"the CUDA translation of the automaton kernel left CPU statements {left[:3]}; "
+                         "hybrid/stochastic/_auto_cuda.py must learn them")
+    return src
+
+
+class _Float32(ast.NodeTransformer):
+    """Types every float literal (and ``float(...)``) of the module as float32: numba types a Python float as
+    float64, which would promote the whole step to double. Integer literals stay integers (indices, exponents)."""
+
+    def visit_Call(self, node):
+        self.generic_visit(node)
+        if isinstance(node.func, ast.Name) and node.func.id == "float":
+            node.func = ast.Name(id="_fty", ctx=ast.Load())
+        return node
+
+    def visit_BinOp(self, node):
+        self.generic_visit(node)
+        ints = [isinstance(v, ast.Constant) and type(v.value) is int for v in (node.left, node.right)]
+        if isinstance(node.op, ast.Div) and all(ints):  # a printed Rational, (1/2): a float64 in numba
+            return ast.copy_location(ast.Call(func=ast.Name(id="_fty", ctx=ast.Load()),
+                                              args=[ast.Constant(node.left.value / node.right.value)], keywords=[]),
+                                     node)
+        return node
+
+    def visit_Constant(self, node):
+        if isinstance(node.value, float):
+            return ast.copy_location(ast.Call(func=ast.Name(id="_fty", ctx=ast.Load()),
+                                              args=[ast.Constant(node.value)], keywords=[]), node)
+        return node
+
+
+def layout(n_obs: int, width: int, n_trans: int, v_bins: int, joint_bins: tuple, n_phases: int) -> dict:
+    """Offsets of the flat histogram cells and how many of them a block keeps in shared memory.
+
+    Examples
+    --------
+    >>> lay = layout(1, 42, 2, 100, (1, 1), 1)
+    >>> lay["h_off"], lay["cells"], lay["shared"] == lay["cells"]
+    (202, 287, True)
+    """
+    vw = int(v_bins) + 1
+    h_off = max(n_trans, 1) * vw
+    j_off = h_off + n_obs * width
+    nx, ny = int(joint_bins[0]), int(joint_bins[1])
+    p_off = j_off + nx * ny
+    cells = p_off + n_phases * n_obs * width
+    if h_off > SHARED_CELLS:
+        raise ParameterError(f"scheduler='cuda': the speed histograms ({h_off} cells: transitions x (bins + 1)) do not "
+                             f"fit in a block's {SHARED_CELLS} shared cells; use fewer speed bins (speed_range)")
+    shared = max(b for b in (h_off, j_off, p_off, cells) if b <= SHARED_CELLS)
+    return dict(vw=vw, h_off=h_off, width=width, j_off=j_off, nx=nx, p_off=p_off, cells=cells, shared=shared)
+
+
+def generate_cuda_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich", *,
+                         summed=(), phases: bool = False, lay: dict, precision: str = "f64", cache: bool = True,
+                         max_registers: int | None = None):
+    """The device module of ``scheme`` for ``automaton``, generated by the automaton generator; ``(source, st)``.
+
+    ``lay``: the histogram layout (:func:`layout`), compile-time constants of the module.
+
+    Examples
+    --------
+    >>> from models.automata import impact_pair
+    >>> lay = layout(1, 42, 2, 100, (1, 1), 1)
+    >>> src, st = generate_cuda_source(impact_pair(), "splitting", {"H": impact_pair().observables["H"]}, lay=lay)
+    >>> "def advance" in src and "def event_step" in src and "@nb.njit" not in src
+    True
+    """
+    if precision not in PRECISIONS:
+        raise ParameterError(f"precision={precision!r}; choose one of {PRECISIONS}")
+    n = len(automaton.states)
+    m_noise = _auto_codegen.analyse(automaton, convention).n_noise
+    n_obs = max(len(observables), 1)
+    ind = _indent
+    draw = []
+    for k in range(m_noise):  # normal q = step * M + k is half of the Philox draw (q // 2) of this path
+        draw += [f"_q = np.uint64(step) * np.uint64({m_noise}) + np.uint64({k})" if m_noise > 1 else
+                 "_q = np.uint64(step)",
+                 "if (_q >> np.uint64(1)) != _zp:",
+                 "    _zp = _q >> np.uint64(1)",
+                 "    _za, _zb = normal_pair(k0, k1, ip, _zp)",
+                 f"_w{k} = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)"]
+    draw.append("_slow = False")
+    jit_options = "cache=True" if cache else ""
+    if max_registers:
+        jit_options += f", max_registers={int(max_registers)}"
+    fields = dict(
+        precision=precision, ftype="float32" if precision == "f32" else "float64", **lay,
+        jit_options=jit_options.strip(", "),
+        rows_in=ind([f"_x{i} = XS[ip, {i}]" for i in range(n)] + [f"_sum{o} = SM[ip, {o}]" for o in range(n_obs)], 8),
+        rows_out=ind([f"XS[ip, {i}] = _x{i}" for i in range(n)] + [f"SM[ip, {o}] = _sum{o}" for o in range(n_obs)],
+                     8),
+        normals=ind(draw, 16), dw_store=ind([f"dw[{k}] = _w{k}" for k in range(m_noise)], 20),
+        from_array=ind([f"_x{i} = x[{i}]" for i in range(n)], 20),
+    )
+    src, st = _auto_codegen.generate_source(automaton, scheme, observables, convention, cache=cache, summed=summed,
+                                            phases=phases, template=_CUDA_TEMPLATE, fields=fields)
+    src = _to_device(src)
+    if precision == "f32":
+        tree = _Float32().visit(ast.parse(src))
+        src = "\n".join(src.splitlines()[:2]) + "\n" + ast.unparse(ast.fix_missing_locations(tree)) + "\n"
+    return src, st
+
+
+def _indent(lines: list, spaces: int) -> str:
+    return "\n".join(" " * spaces + line for line in lines) or " " * spaces + "pass"
+
+
+# ---------------------------------------------------------------------------------------------------- runner
+def default_launch_steps(paths: int, threads_per_block: int) -> int:
+    """Steps per launch: about 1e10 path-steps (a fraction of a second on a large GPU), at least 1000, and at most
+    :func:`max_launch_steps`.
+
+    Examples
+    --------
+    >>> default_launch_steps(10**6, 128), default_launch_steps(8, 128)
+    (10000, 262143)
+    """
+    return int(min(max_launch_steps(threads_per_block), max(1000, 10**10 // max(paths, 1))))
+
+
+def max_launch_steps(threads_per_block: int) -> int:
+    """The most steps one launch may take so that no int32 shared cell can overflow: a block adds at most one
+    sample per thread and step to a cell of the observables, and at most ``MAX_EVENTS`` firings to a speed cell.
+
+    Examples
+    --------
+    >>> max_launch_steps(128)
+    262143
+    """
+    return (2**31 - 1) // (int(threads_per_block) * _auto_codegen.MAX_EVENTS)
+
+
+def _after_launch(n_done: int) -> None:
+    """Called after each launch has finished (a test interrupts a run here)."""
+
+
+class CudaRun:
+    """The device module of one automaton run and the per-path state it advances (one row per path).
+
+    Built by :func:`hybrid.stochastic.simulate_automaton` (``scheduler='cuda'``) from its job
+    (:class:`~hybrid.stochastic._auto_exec.AutomatonJob`: the run's arguments and per-chunk shapes).
+    """
+
+    ORDER = ("XS", "MS", "CNT", "SM", "PSM", "IWS", "FWS", "elogs", "gh")
+
+    def __init__(self, job, automaton, scheme: str, observables: dict, convention: str, *, summed, phases: int,
+                 n_trans: int, seed: int, precision: str = "f64", threads_per_block: int = 128):
+        if precision not in PRECISIONS:
+            raise ParameterError(f"precision={precision!r}; choose one of {PRECISIONS}")
+        tpb = threads_per_block
+        if isinstance(tpb, bool) or not isinstance(tpb, (int, np.integer)) or not (32 <= tpb <= 1024 and tpb % 32 == 0):
+            raise ParameterError(f"threads_per_block={tpb!r} must be a multiple of 32 in [32, 1024]")
+        self.cuda = require_cuda()
+        self.job, self.tpb, self.precision = job, int(tpb), precision
+        self.ft = np.float32 if precision == "f32" else np.float64
+        a, shapes = job.args, job.shapes
+        self.n_obs, self.width = shapes["hist"][0]
+        self.n_trans, self.phases = n_trans, phases
+        ny, nx = shapes["jhist"][0]
+        self.lay = layout(self.n_obs, self.width, n_trans, a["v_bins"], (nx, ny), phases)
+        sim = simulator_enabled()
+        src, st = generate_cuda_source(automaton, scheme, observables, convention, summed=summed, phases=phases > 0,
+                                       lay=self.lay, precision=precision, cache=not sim,
+                                       max_registers=None if sim else max_registers_from_env())
+        self.source, self.n = src, len(st.states)
+        where = "sim" if sim else "dev"
+        self.name = f"vibro_auto_cuda_{scheme}_{precision}_{where}_{_auto_codegen.kernel_key(src)}"
+        self.module, _ = _codegen.load_source(self.name, src, label=f"automaton/{scheme} (CUDA, {precision})")
+        self.key = _cuda_rng.seed_key(seed)
+        ft = self.ft
+        self.scalars = (ft(a["dt"]), ft(0.0), a["p"].astype(ft), a["obs_lo"].astype(ft), a["obs_scale"].astype(ft),
+                        a["obs_bins"].astype(np.int64), np.int64(a["jx"]), np.int64(a["jy"]), a["j_lo"].astype(ft),
+                        a["j_scale"].astype(ft), a["j_bins"].astype(np.int64), ft(a["v_scale"]),
+                        np.int64(a["v_bins"]))
+        self._check_memory(int(job.npaths.sum()))  # before any compile or launch
+
+    def fresh(self, paths: int) -> dict:
+        """The host arrays of ``paths`` paths at t = 0."""
+        a, mod = self.job.args, self.module
+        fw = np.zeros((paths, mod.FW))
+        for j in range(self.n_trans):  # [sum, count, min, max] of the guard changes: the extremes start empty
+            fw[:, mod.FW_GSTAT + 4 * j + 2], fw[:, mod.FW_GSTAT + 4 * j + 3] = np.inf, -np.inf
+        n_log = self.job.shapes["elog"][0][1]
+        return {"XS": np.tile(a["x0"].astype(self.ft), (paths, 1)), "MS": np.full(paths, a["mode0"], np.int64),
+                "CNT": np.zeros((paths, 6), np.int64), "SM": np.zeros((paths, self.n_obs)),
+                "PSM": np.zeros((paths, max(self.phases, 1), self.n_obs)), "IWS": np.zeros((paths, mod.IW), np.int64),
+                "FWS": fw, "elogs": np.full((paths, n_log, 3), np.nan), "gh": np.zeros(self.lay["cells"], np.int64)}
+
+    def advance(self, dev: dict, paths: int, n0: int, n1: int, n_burn: int, track: bool) -> None:
+        """Launch the kernel on the device arrays ``dev`` for steps [n0, n1) and wait for it."""
+        a = self.job.args
+        blocks = max(1, -(-paths // self.tpb))
+        dt, t0, *rest = self.scalars
+        self.module.advance[blocks, self.tpb](
+            np.int64(n0), np.int64(n1), np.int64(paths), np.int64(n_burn), np.int64(a["stride"]), *self.key, dt, t0,
+            *rest, bool(track), np.int64(a["phases"]), np.int64(a["phase_steps"]),
+            *(dev[k] for k in self.ORDER))
+        self.cuda.synchronize()
+
+    def pilot(self, steps: int) -> np.ndarray:
+        """The step rule's guard statistics (transitions, 4) of chunk 0's paths over ``steps`` steps of burn-in,
+        every step through ``event_step`` (as the CPU pilot)."""
+        paths = int(self.job.npaths[0])
+        dev = {k: self.cuda.to_device(v) for k, v in self.fresh(paths).items()}
+        done = 0
+        while done < steps:
+            n1 = min(steps, done + max_launch_steps(self.tpb))
+            self.advance(dev, paths, done, n1, steps, True)
+            done = n1
+        fw = dev["FWS"].copy_to_host()
+        g0 = self.module.FW_GSTAT
+        out = np.zeros((max(self.n_trans, 1), 4))
+        for j in range(self.n_trans):
+            gs = g0 + 4 * j
+            out[j] = fw[:, gs].sum(), fw[:, gs + 1].sum(), fw[:, gs + 2].min(), fw[:, gs + 3].max()
+        return out
+
+    def run(self, rows: dict, *, run_id: str, checkpoint=None, resume=False, checkpoint_every=4,
+            launch_steps=None) -> dict:
+        """Advance every path over the run's steps and fill the runner's per-chunk ``rows``; the run's settings.
+
+        Launches of ``launch_steps`` steps (default :func:`default_launch_steps`); every ``checkpoint_every``
+        launches, and at the end, the state goes to the checkpoint directory; ``resume`` continues from it.
+        """
+        a = self.job.args
+        paths = int(self.job.npaths.sum())
+        total = a["n_burn"] + a["n_samp"] * a["stride"]
+        cap = max_launch_steps(self.tpb)
+        if launch_steps is None:
+            launch_steps = default_launch_steps(paths, self.tpb)
+        elif isinstance(launch_steps, bool) or not isinstance(launch_steps, (int, np.integer)) or \
+                not 1 <= launch_steps <= cap:
+            raise ParameterError(f"launch_steps={launch_steps!r} must be an integer in [1, {cap}] (int32 shared "
+                                 f"cells of {self.tpb} threads per block)")
+        host = self.fresh(paths)
+        host["n_done"] = np.zeros(1, np.int64)
+        ckdir = Path(checkpoint) if checkpoint is not None else None
+        if ckdir is not None and resume:
+            _auto_exec.load(ckdir, run_id, host)  # fills host in place; absent: start from t = 0
+        n = int(host["n_done"][0])
+        dev = {k: self.cuda.to_device(host[k]) for k in self.ORDER}
+        launches = 0
+
+        def save(n_done):
+            state = {k: dev[k].copy_to_host() for k in self.ORDER}
+            state["n_done"] = np.array([n_done], np.int64)
+            _auto_exec.write(ckdir, run_id, np.zeros(0, bool), state)
+            return state
+
+        t_start = time.perf_counter()
+        while n < total:
+            n1 = min(total, n + int(launch_steps))
+            self.advance(dev, paths, n, n1, a["n_burn"], False)
+            n = n1
+            launches += 1
+            _after_launch(n)
+            if ckdir is not None and launches % checkpoint_every == 0 and n < total:
+                save(n)
+        state = save(n) if ckdir is not None else {k: dev[k].copy_to_host() for k in self.ORDER}
+        self._fill(rows, state, total)
+        return {"scheduler": "cuda", "precision": self.precision, "rng": RNG, "threads_per_block": self.tpb,
+                "launch_steps": int(launch_steps), "device_seconds": time.perf_counter() - t_start,
+                "cuda_kernel": self.name}
+
+    def _check_memory(self, paths: int) -> None:
+        """Refuse, with the estimate, per-path rows that do not fit in the device's memory (the simulator: 4 GB)."""
+        from hybrid.sizes import check_size
+
+        mod, ft = self.module, np.dtype(self.ft).itemsize
+        row = (self.n * ft + 8 * (1 + 6 + self.n_obs + max(self.phases, 1) * self.n_obs + mod.IW + mod.FW)
+               + 24 * self.job.shapes["elog"][0][1])
+        if simulator_enabled():
+            limit = 4e9
+        else:
+            limit = 0.8 * self.cuda.current_context().get_memory_info()[0]
+        check_size(f"scheduler='cuda' with {paths} paths", memory=float(paths) * row, max_memory=limit,
+                   detail=f"{row} bytes of state, counters and sums per path, against 80 % of the device's free "
+                          "memory", fix="run fewer paths per call and merge the ensembles")
+
+    def _fill(self, rows: dict, s: dict, total: int) -> None:
+        """Per-path rows -> the runner's per-chunk rows (added in path order); the histograms into chunk 0's row."""
+        a, mod, lay = self.job.args, self.module, self.lay
+        cp = self.job.shapes["elog"][0][0]
+        paths = s["XS"].shape[0]
+        starts = np.arange(0, paths, cp)
+        iw, fw = s["IWS"], s["FWS"]
+        cnt = s["CNT"].copy()
+        cnt[:, 1] += iw[:, 1]  # event_step's own counters: steps over the event cap, failed checks
+        cnt[:, 5] += iw[:, 5]
+        rows["counts"][:] = np.add.reduceat(cnt, starts, axis=0)
+        rows["sums"][:] = np.add.reduceat(s["SM"], starts, axis=0)
+        nt = self.n_trans
+        if nt:
+            rows["events"][:, :nt] = np.add.reduceat(iw[:, mod.IW_EVENTS:mod.IW_EVENTS + nt], starts, axis=0)
+            rows["vsum"][:, :nt] = np.add.reduceat(fw[:, :nt], starts, axis=0)
+            g = fw[:, mod.FW_GSTAT:mod.FW_GSTAT + 4 * nt].reshape(paths, nt, 4)
+            rows["gstat"][:, :nt, :2] = np.add.reduceat(g[:, :, :2], starts, axis=0)
+            rows["gstat"][:, :nt, 2] = np.minimum.reduceat(g[:, :, 2], starts, axis=0)
+            rows["gstat"][:, :nt, 3] = np.maximum.reduceat(g[:, :, 3], starts, axis=0)
+        for k, s0 in enumerate(starts):  # the speed at the first failed check of the chunk's first such path
+            bad = np.flatnonzero(iw[s0:s0 + cp, 5])
+            rows["fbad"][k, 0] = fw[s0 + bad[0], mod.FW_FBAD] if bad.size else 0.0
+        n_log = rows["elog"].shape[2]
+        padded = np.full((len(starts) * cp, n_log, 3), np.nan)
+        padded[:paths] = s["elogs"]
+        rows["elog"][:] = padded.reshape(len(starts), cp, n_log, 3)
+        nlog = np.zeros(len(starts) * cp, np.int64)
+        nlog[:paths] = iw[:, mod.IW_NLOG]
+        rows["nlog"][:] = nlog.reshape(len(starts), cp)
+        gh = s["gh"]
+        nv = max(nt, 1)
+        rows["vhist"][0] = gh[:nv * lay["vw"]].reshape(nv, lay["vw"])
+        rows["hist"][0] = gh[lay["h_off"]:lay["j_off"]].reshape(self.n_obs, self.width)
+        rows["jhist"][0] = gh[lay["j_off"]:lay["p_off"]].reshape(rows["jhist"].shape[1:])
+        if self.phases:
+            rows["phist"][0] = gh[lay["p_off"]:].reshape(self.phases, self.n_obs, self.width)
+            rows["psums"][:] = np.add.reduceat(s["PSM"], starts, axis=0)
+            # every path samples section k at the same steps: (step + 1) a multiple of phase_steps, after burn-in
+            ends = np.arange(a["n_burn"] + 1, total + 1)
+            ends = ends[ends % a["phase_steps"] == 0]
+            per_path = np.bincount((ends // a["phase_steps"]) % self.phases, minlength=self.phases)
+            rows["pcount"][:] = np.minimum(cp, paths - starts)[:, None] * per_path[None, :]
+
+
+def max_registers_from_env() -> int | None:
+    """``VIBRO_CUDA_MAX_REGISTERS`` as an int (unset, empty or 0: no cap; the compiler chooses).
+
+    Examples
+    --------
+    >>> import os; os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None) and None
+    >>> max_registers_from_env() is None
+    True
+    """
+    import os
+
+    raw = os.environ.get("VIBRO_CUDA_MAX_REGISTERS", "").strip()
+    if not raw or raw == "0":
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = -1
+    if not 16 <= n <= 255:
+        raise ParameterError(f"VIBRO_CUDA_MAX_REGISTERS={raw!r} must be an integer in [16, 255] (or 0: no cap)")
+    return n
+
+
+def kernel_resources(settings: dict) -> dict:
+    """Registers and local memory per thread, shared memory per block and the occupancy they allow, of the kernel
+    that ran an ensemble (its ``settings``), on the current device. Needs a real GPU (the simulator compiles nothing).
+
+    Occupancy: resident warps per SM over the most an SM holds, from the limits on threads, registers (allocated
+    per warp in units of 256), shared memory and 32 blocks per SM (the CUDA occupancy calculator's rule).
+    """
+    cuda = require_cuda()
+    if simulator_enabled():
+        raise CudaUnavailableError("kernel_resources needs a GPU: the simulator compiles no kernel")
+    module = _codegen._LOADED.get(settings.get("cuda_kernel"))
+    if module is None:
+        raise ParameterError("kernel_resources: the ensemble's CUDA kernel was not run in this process")
+    kernel = module.advance
+
+    def one(value):  # a kernel compiled at its first launch answers per signature: it has one
+        return int(next(iter(value.values())) if isinstance(value, dict) else value)
+
+    regs = one(kernel.get_regs_per_thread())
+    local = one(kernel.get_local_mem_per_thread())
+    shared = one(kernel.get_shared_mem_per_block())
+    dev = cuda.get_current_device()
+    tpb = int(settings["threads_per_block"])
+    warps = -(-tpb // 32)
+    per_warp = -(-regs * 32 // 256) * 256
+    blocks = min(int(dev.MAX_THREADS_PER_MULTIPROCESSOR) // tpb,
+                 int(dev.MAX_REGISTERS_PER_MULTIPROCESSOR) // max(per_warp * warps, 1),
+                 int(dev.MAX_SHARED_MEMORY_PER_MULTIPROCESSOR) // max(shared, 1), 32)
+    occupancy = blocks * warps * 32 / int(dev.MAX_THREADS_PER_MULTIPROCESSOR)
+    return {"registers_per_thread": regs, "local_bytes_per_thread": local, "shared_bytes_per_block": shared,
+            "blocks_per_sm": blocks, "occupancy": occupancy}
+
+
+def kernel_signature(precision: str = "f64") -> tuple:
+    """numba types of the arguments of ``advance``, in the order :meth:`CudaRun.advance` passes them."""
+    from numba import types as t
+
+    f = t.float32 if precision == "f32" else t.float64
+    i, d = t.int64, t.float64
+
+    def arr(dtype, ndim):
+        return t.Array(dtype, ndim, "C")
+
+    return (i, i, i, i, i, t.uint64, t.uint64, f, f, arr(f, 1), arr(f, 1), arr(f, 1), arr(i, 1), i, i, arr(f, 1),
+            arr(f, 1), arr(i, 1), f, i, t.boolean, i, i, arr(f, 2), arr(i, 1), arr(i, 2), arr(d, 2), arr(d, 3),
+            arr(i, 2), arr(d, 2), arr(d, 3), arr(i, 1))
+
+
+def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: int = 42, v_bins: int = 100,
+                phases: int = 0, precision: str = "f64", cc=(9, 0)) -> str:
+    """PTX of the automaton kernel for compute capability ``cc`` (default sm_90, the H100), without a GPU.
+
+    The real numba-cuda pipeline (typing, lowering, NVVM), which the simulator skips. Needs numba-cuda and the NVVM
+    and NVRTC libraries (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels or a CUDA toolkit),
+    not a driver; ``NUMBA_ENABLE_CUDASIM`` must be unset.
+    """
+    from numba import cuda
+
+    if getattr(cuda, "implementation", "") != "NVIDIA" or simulator_enabled():
+        raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
+    lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
+    src, _ = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
+                                  cache=False)
+    module, _ = _codegen.load_source(f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}", src)
+    from numba.cuda import dispatcher
+
+    # numba-cuda compiles a kernel's device functions for the current device's compute capability; without a device
+    # there is none, so it is given for this compile only
+    current = dispatcher.get_current_device
+    dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=tuple(cc))
+    try:
+        ptx, _ = cuda.compile_ptx(module.advance.py_func, kernel_signature(precision), cc=cc)
+    finally:
+        dispatcher.get_current_device = current
+    return ptx
