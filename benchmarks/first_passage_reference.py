@@ -12,10 +12,11 @@ missed: the passage comes late by O(sqrt(dt)) (2-4 % at dt = 0.002-0.01). The ru
     H + beta sqrt(2 D dt) |y| < H_c,        beta = -zeta(1/2) / sqrt(2 pi) = 0.5826,
 
 the continuity correction of a discretely watched diffusion (Broadie, Glasserman and Kou 1997; the local noise
-intensity of H at the crossing is sqrt(2 D) |y|), which leaves an O(dt) error. Checks: at H_c = 0.25 the uncorrected runs at three steps approach the corrected value
-as sqrt(dt) (``validate``), and at every level the corrected runs at two or three steps are compared (the
-``reference`` command prints each step's difference from the finest with its CI; they agree at H_c <= 1.0, not at
-1.5, where the corrected mean rises by 2.7 % from dt = 0.01 to 0.0025, and the finest step alone is the reference).
+intensity of H at the crossing is sqrt(2 D) |y|), which leaves an O(dt) error in theory. Checks: at H_c = 0.25 the
+uncorrected runs at three steps approach the corrected value as sqrt(dt) (``validate``), and at every level the
+corrected runs at two or three steps are compared (``reference`` prints each step's difference from the finest with
+its CI): they agree at H_c <= 1.0, not at 1.5, where the corrected mean rises by 2.7 % from dt = 0.01 to 0.0025;
+there the finest step alone is the reference.
 
 Paths still inside at t_max are counted; the mean adds their tail R(t_max) / lambda, lambda the log-slope of the
 Monte Carlo survival itself over its last decade (that term is printed; it is under 0.1 % of the mean).
