@@ -2,7 +2,7 @@
 
 The reference (``benchmarks/data/first_passage_reference.json``, made by ``benchmarks/first_passage_reference.py``)
 is event-exact Monte Carlo with the continuity-corrected level at two or three time steps, 24,000-160,000 paths per
-level, 95 % CI 0.36-1.2 % (docs/results/first-passage-spectra.md has the table). fpk is judged on a coarse grid
+level, 95 % CI 0.36-0.74 % (docs/results/first-passage-spectra.md has the table). fpk is judged on a coarse grid
 with its own two-grid error estimate: the tolerance is that estimate plus the reference's CI, no more.
 """
 
@@ -44,8 +44,7 @@ def test_the_reference_is_converged_in_the_time_step_and_holds_about_one_percent
 
 
 # at H_c = 2.0 fpk on 60x64 (120.93) passes by its large two-grid estimate (2.34, against 30x32: 118.59); 240x256
-# (120.61) is +1.4 % from the reference (119.00 +- 0.86), which is probably 1-2 % low: at 1.5 the corrected Monte
-# Carlo rose by 2.7 % from dt = 0.01 to 0.0025, and the reference there is the finest step alone
+# (120.61) is +1.3 % from the reference (119.03 +- 0.77, three steps agreeing)
 @pytest.mark.filterwarnings("ignore:grid 60 x 64")  # at 2.0 the 60x64 estimate exceeds 1 %, as said above
 @pytest.mark.parametrize("level", ["0.25", "0.5", "1.0", "1.5", "2.0"])
 def test_fpk_mean_first_passage_time_meets_the_monte_carlo_reference(reference, level):
