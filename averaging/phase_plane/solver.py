@@ -516,7 +516,8 @@ def is_single_well(model) -> bool:
 
 def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model", restitution=None,
                           points: int = 2000, check: bool = True, tol: float = 0.005,
-                          order: float | None = None, scheme: str = "auto") -> PhaseDensity:
+                          order: float | None = None, scheme: str = "auto",
+                          stretch: float = DEFAULT_STRETCH) -> PhaseDensity:
     """Stationary density p(x, y) of ``model`` with impact boundary conditions, and p(H), marginals, impacts.
 
     Parameters
@@ -546,6 +547,8 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
     scheme : {'auto', 'rings', 'cartesian'}
         ``auto``: energy-angle rings for a single well, Cartesian finite volumes (:mod:`.cartesian`) for several
         wells (a double-well Duffing); p(H) then starts at min G < 0.
+    stretch : float
+        Rings only: the ratio of the innermost ring's width to the uniform one (see :func:`solve_phase_plane`).
 
     Returns
     -------
@@ -586,7 +589,7 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     check_energy_range(model, float(h_max), walls)
     h = _first_range(model, float(h_max))
-    sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3)
+    sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3, stretch=stretch)
     for _ in range(16):
         # rings spread over a range far wider than the mass would put it into the first few: solve where it is
         top = _mass_energy(sd)
@@ -596,7 +599,7 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
             break
         else:
             h = 1.25 * top
-        sd = solve_phase_plane(model, grid, h, walls, restitution, 3)
+        sd = solve_phase_plane(model, grid, h, walls, restitution, 3, stretch=stretch)
     if h < h_max or len(sd.H) != int(points):  # the last solve may have widened back to h_max with 3 points
         sd.h_max = float(h_max)
         sd.H = output_grid(h, float(h_max), int(points))
@@ -615,9 +618,10 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
                       GridWarning, stacklevel=2)
     coarse_grid = (max(8, grid[0] // 2), max(16, grid[1] // 2))
     quarter_grid = (max(8, grid[0] // 4), max(16, grid[1] // 4))
-    half = solve_phase_plane(model, coarse_grid, h, walls, restitution, 3)
+    half = solve_phase_plane(model, coarse_grid, h, walls, restitution, 3, stretch=stretch)
     # the third grid costs 1/16 of the first: the observed order (the estimate is safe where convergence is slow)
-    quarter = solve_phase_plane(model, quarter_grid, h, walls, restitution, 3) if quarter_grid != coarse_grid else None
+    quarter = (solve_phase_plane(model, quarter_grid, h, walls, restitution, 3, stretch=stretch)
+               if quarter_grid != coarse_grid else None)
     sd._coarse = (half, quarter)
     sd._tail = tail
     law = restitution if restitution is not None else model.restitution

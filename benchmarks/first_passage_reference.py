@@ -1,0 +1,195 @@
+"""Converged Monte Carlo reference for Example 1's mean first-passage time of the energy and its survival R(t).
+
+Results in docs/results/first-passage-spectra.md; the reference is stored in
+``benchmarks/data/first_passage_reference.json`` (``tests/test_first_passage_reference.py`` reads it).
+
+Example 1 (Duffing a = 1, b = 0.2, c = 0.025, D = 0.05, walls at +-1, Ma V_C = 0.4) from rest; T = first time
+H >= H_c. Event-exact Monte Carlo (``simulate_first_passage``, scheme ``splitting``): the walls and the level are
+located inside the step, but the noise enters once per step, so H, which carries noise (dH has the diffusion
+sqrt(2 D) |y| dW), is watched at the step ends only, and a path that crosses H_c and comes back inside one step is
+missed: the passage comes late by O(sqrt(dt)) (2-4 % at dt = 0.002-0.01). The run therefore watches the moved level
+
+    H + beta sqrt(2 D dt) |y| < H_c,        beta = -zeta(1/2) / sqrt(2 pi) = 0.5826,
+
+the continuity correction of a discretely watched diffusion (Broadie, Glasserman and Kou 1997; the local noise
+intensity of H at the crossing is sqrt(2 D) |y|), which leaves an O(dt) error in theory. Checks: at H_c = 0.25 the
+uncorrected runs at three steps approach the corrected value as sqrt(dt) (``validate``), and at every level the
+corrected runs at two or three steps are compared (``reference`` prints each step's difference from the finest with
+its CI): where a difference exceeds its CI (H_c = 1.5), the finest step alone is the reference.
+
+Paths still inside at t_max are counted; the mean adds their tail R(t_max) / lambda, lambda the log-slope of the
+Monte Carlo survival itself over its last decade (that term is printed; it is under 0.1 % of the mean).
+
+    python benchmarks/first_passage_reference.py run H_c DT PATHS SEED [--uncorrected]   # one run, appended
+    python benchmarks/first_passage_reference.py plan                                     # the runs of the file
+    python benchmarks/first_passage_reference.py reference                                # combine -> json, table
+
+Each run appends one JSON line to ``benchmarks/data/first_passage_mc_runs.jsonl`` (paths, dt, seed, t_max, the
+mean with its 95 % CI, censored paths, the tail term, R(t) at 200 times with Wilson intervals, CPU and wall s).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from hybrid import HybridAutomaton
+from hybrid.stochastic import simulate_first_passage
+from models import DuffingImpact, Ma
+
+DATA = Path(__file__).resolve().parent / "data"
+RUNS = DATA / "first_passage_mc_runs.jsonl"
+REFERENCE = DATA / "first_passage_reference.json"
+BETA = 0.5826  # -zeta(1/2)/sqrt(2 pi)
+LEVELS = (0.25, 0.5, 1.0, 1.5, 2.0)
+T_MAX = {0.25: 60.0, 0.5: 120.0, 1.0: 300.0, 1.5: 450.0, 2.0: 800.0}  # R(t_max) below 1e-3 (fpk's decay rates)
+SNAPSHOTS = 200
+# (H_c, dt, paths, seed): the runs behind the stored reference (seeds differ between every pair of runs)
+PLAN = [(0.25, 0.01, 100_000, 101), (0.25, 0.005, 60_000, 102), (0.5, 0.01, 24_000, 201), (0.5, 0.005, 24_000, 202),
+        (1.0, 0.01, 24_000, 301), (1.0, 0.005, 24_000, 302), (1.5, 0.01, 24_000, 401), (1.5, 0.005, 24_000, 402),
+        (1.5, 0.0025, 24_000, 403), (1.5, 0.0025, 24_000, 404),
+        (2.0, 0.01, 30_000, 501), (2.0, 0.005, 15_000, 502), (2.0, 0.005, 15_000, 503), (2.0, 0.0025, 15_000, 504)]
+# the uncorrected level at H_c = 0.25 (the continuity correction's check): (dt, paths, seed)
+VALIDATE = [(0.01, 30_000, 111), (0.005, 30_000, 112), (0.0025, 30_000, 113)]
+
+
+def example1():
+    """Example 1's automaton with two extra parameters, the level ``hc`` and the correction ``kb``: one kernel
+    serves every level and step (parameters are runtime values)."""
+    base = DuffingImpact(restitution=Ma(vc=0.4)).to_automaton()
+    return HybridAutomaton(base.states, {**base.parameters, "hc": 1.0, "kb": 0.0}, base.modes, base.transitions,
+                           base.initial_mode, base.observables, base.positive, base.nonnegative)
+
+
+def tail_term(times, survival, paths):
+    """R(t_max) / lambda with lambda the log-slope of R over its last decade (0 when nothing is left)."""
+    r_end = survival[-1]
+    if r_end <= 0:
+        return 0.0, None
+    top = min(1.0, 10 * r_end)
+    pick = (survival <= top) & (survival > 0)
+    t, r = times[pick], survival[pick]
+    if len(t) < 3 or survival[-1] * paths < 5:  # too few survivors to fit: use the last two e-folds seen
+        pick = (survival <= max(10 * r_end, 0.05)) & (survival > 0)
+        t, r = times[pick], survival[pick]
+    rate = -np.polyfit(t, np.log(r), 1)[0]
+    return float(r_end / rate), float(rate)
+
+
+def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000):
+    """One ensemble: the mean first-passage time (with the tail term) and R(t) at SNAPSHOTS times."""
+    model = example1()
+    kb = BETA * math.sqrt(2 * 0.05 * dt) if corrected else 0.0
+    t_max = T_MAX[H_c]
+    t0, c0 = time.perf_counter(), time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # censoring is counted below and its tail added
+        r = simulate_first_passage(model, "H + kb*abs(y) < hc", "splitting", dt=dt, paths=paths, t_max=t_max,
+                                   x0=(0.0, 0.0), seed=seed, snapshots=SNAPSHOTS, time_bins=40_000,
+                                   params={"hc": H_c, "kb": kb}, chunk_paths=chunk_paths)
+        est = r.mean_time()
+    tail, rate = tail_term(r.times, r.survival, r.paths)
+    lo, hi = r.survival_interval()
+    return {"H_c": H_c, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb, "t_max": t_max,
+            "scheme": "splitting", "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
+            "tail": tail, "tail_rate": rate, "censored": r.censored, "times": r.times.tolist(),
+            "R": r.survival.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
+            "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - t0}
+
+
+def load_runs():
+    return [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()] if RUNS.exists() else []
+
+
+def combine(runs):
+    """Pool runs of one (level, dt) (paths-weighted; CIs in quadrature as independent means)."""
+    n = sum(r["paths"] for r in runs)
+    mean = sum(r["paths"] * r["mean"] for r in runs) / n
+    ci = math.sqrt(sum((r["paths"] / n * r["ci95"]) ** 2 for r in runs))
+    R = sum(r["paths"] * np.array(r["R"]) for r in runs) / n
+    return {"mean": mean, "ci95": ci, "paths": n, "seeds": [r["seed"] for r in runs],
+            "censored": sum(r["censored"] for r in runs), "tail": sum(r["paths"] * r["tail"] for r in runs) / n,
+            "cpu_seconds": sum(r["cpu_seconds"] for r in runs), "R": R, "times": np.array(runs[0]["times"])}
+
+
+def reference():
+    """Per level: the corrected runs per step and each step's difference from the finest with its CI; the
+    reference is their inverse-variance pool where every difference lies within its CI, else the finest step
+    alone. R(t) at H_c = 0.25 (all its corrected runs) with its Wilson interval. Writes REFERENCE."""
+    from hybrid.stochastic._passage import _wilson
+
+    runs = [r for r in load_runs() if r["corrected"]]
+    out = {"model": "Example 1: DuffingImpact a=1 b=0.2 c=0.025 D=0.05 walls +-1, Ma(vc=0.4); start (0, 0)",
+           "quantity": "mean first time with H >= H_c",
+           "method": "simulate_first_passage, scheme splitting, level moved to H + 0.5826 sqrt(2 D dt)|y| < H_c "
+                     "(continuity correction), tail beyond t_max added as R(t_max)/lambda",
+           "script": "benchmarks/first_passage_reference.py", "levels": {}}
+    for H_c in LEVELS:
+        per_dt = {}
+        for dt in sorted({r["dt"] for r in runs if r["H_c"] == H_c}, reverse=True):
+            per_dt[dt] = combine([r for r in runs if r["H_c"] == H_c and r["dt"] == dt])
+        if not per_dt:
+            continue
+        steps = sorted(per_dt, reverse=True)
+        fine = per_dt[steps[-1]]
+        differences = {f"{dt:g}-{steps[-1]:g}": [per_dt[dt]["mean"] - fine["mean"],
+                                                 math.hypot(per_dt[dt]["ci95"], fine["ci95"])] for dt in steps[:-1]}
+        # an O(dt) residual of the correction shows as a step difference beyond its CI: then the finest step alone
+        pooled = len(steps) >= 2 and all(abs(d) <= ci for d, ci in differences.values())
+        if pooled:
+            w = {dt: 1 / v["ci95"] ** 2 for dt, v in per_dt.items()}
+            mean = sum(w[dt] * v["mean"] for dt, v in per_dt.items()) / sum(w.values())
+            ci = 1 / math.sqrt(sum(w.values()))
+        else:
+            mean, ci = fine["mean"], fine["ci95"]
+        row = {"mean": mean, "ci95": ci, "relative_ci95": ci / mean, "pooled_over_steps": pooled,
+               "reference_steps": [float(dt) for dt in (steps if pooled else steps[-1:])],
+               "step_differences": differences,
+               "steps": {str(dt): {k: v for k, v in c.items() if k not in ("R", "times")}
+                         for dt, c in per_dt.items()}}
+        if H_c == 0.25:  # R(t): every corrected run pooled (their steps agree)
+            n = sum(c["paths"] for c in per_dt.values())
+            R = sum(c["paths"] * c["R"] for c in per_dt.values()) / n
+            lo, hi = _wilson(np.round(R * n), n)
+            row["survival"] = {"t": per_dt[steps[0]]["times"].tolist(), "R": R.tolist(), "R_lo": lo.tolist(),
+                               "R_hi": hi.tolist(), "paths": n}
+        out["levels"][str(H_c)] = row
+        print(json.dumps({"H_c": H_c, **{k: v for k, v in row.items() if k != "survival"}}), flush=True)
+    REFERENCE.write_text(json.dumps(out, indent=1) + "\n")
+
+
+def main(argv):
+    if not argv or argv[0] not in ("run", "plan", "reference", "validate"):
+        print(__doc__)
+        return 2
+    if argv[0] == "plan":
+        for H_c, dt, paths, seed in PLAN:
+            print(f"run {H_c} {dt} {paths} {seed}")
+        for dt, paths, seed in VALIDATE:
+            print(f"run 0.25 {dt} {paths} {seed} --uncorrected")
+        return 0
+    if argv[0] == "reference":
+        reference()
+        return 0
+    if argv[0] == "validate":
+        rows = [r for r in load_runs() if r["H_c"] == 0.25]
+        for r in sorted(rows, key=lambda r: (r["corrected"], -r["dt"])):
+            print(f"corrected={r['corrected']!s:5} dt={r['dt']:<8g} paths={r['paths']:>7} "
+                  f"mean={r['mean']:.4f} +- {r['ci95']:.4f}")
+        return 0
+    H_c, dt, paths, seed = float(argv[1]), float(argv[2]), int(argv[3]), int(argv[4])
+    out = run(H_c, dt, paths, seed, corrected="--uncorrected" not in argv)
+    with open(RUNS, "a") as fh:
+        fh.write(json.dumps(out) + "\n")
+    print(json.dumps({k: v for k, v in out.items() if k not in ("times", "R", "R_lo", "R_hi")}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
