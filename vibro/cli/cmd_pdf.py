@@ -189,7 +189,7 @@ def _run_forced(args, model, plan) -> int:
         atomic_write_text(args.joint, csv_text({"x": X, "y": Y, "p": pxy}))
         written.append(args.joint)
     if phase_table is not None:
-        atomic_write_text(phases_path(args), phase_table.tocsv_text(index=False, float_format="%.17g"))
+        atomic_write_text(phases_path(args), phase_table.to_csv(index=False, float_format="%.17g"))
         written.append(str(phases_path(args)))
     results = {"mean_energy": sol.mean_energy, "impact_rate": sol.impact_rate, "mean_x2": sd.mean_x2,
                "prob_below_barrier": sd.prob_below_barrier, "periodicity": sol.periodicity,
