@@ -152,12 +152,16 @@ def _law_b(v):
     return 0.5 + 0.0 * v
 
 
-def test_resume_with_another_callable_law_is_refused(tmp_path):
+def test_resume_with_another_callable_law_is_refused(tmp_path, caplog):
     # a checkpoint of one callable law resumed with another mixed the two ensembles (E[H] 0.921 vs 1.652 / 0.717)
     simulate_ensemble(DuffingImpact(restitution=CustomRestitution(_law_a)), "milstein", checkpoint=tmp_path, **KW)
+    caplog.set_level("INFO", logger="hybrid.stochastic.compile")
+    caplog.clear()
     with pytest.raises(CheckpointError, match=r"restitution law differ"):
         simulate_ensemble(DuffingImpact(restitution=CustomRestitution(_law_b)), "milstein", checkpoint=tmp_path,
                           resume=True, **KW)
+    # refused before law b's kernel (compiled in memory, never cached) is built
+    assert not [r for r in caplog.records if r.name == "hybrid.stochastic.compile"]
     # the same law (another function object with the same code and constants) resumes
     same = eval(compile("lambda v: 0.9 + 0.0 * v", "<law>", "eval"))
     s = simulate_ensemble(DuffingImpact(restitution=CustomRestitution(same)), "milstein", checkpoint=tmp_path,

@@ -227,9 +227,22 @@ def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tupl
     """
     t0 = time.perf_counter()
     chunks, identity = _job(model, settings, h_scale, v_scale, xy_scales, scheme)
+    return compile_job(chunks, identity, t0), chunks
+
+
+def plan(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple, scheme: str = "milstein") -> tuple:
+    """What :func:`build` returns before compiling: ``(AutomatonChunks, identity)``, so that a checkpoint of another
+    run is refused before a kernel is built (:func:`compile_job` compiles)."""
+    return _job(model, settings, h_scale, v_scale, xy_scales, scheme)
+
+
+def compile_job(chunks, identity: dict, t0: float | None = None):
+    """Compile (or load from the disk cache) the kernel of ``chunks``: an :class:`AutomatonKernel` whose
+    ``compile_time`` counts from ``t0`` (default: now)."""
+    t0 = time.perf_counter() if t0 is None else t0
     module = chunks.job.module()
     chunks.job.run(0, _rng.chunk_states(0, 1)[0], burn=1, samples=1, module=module)  # compile (or load) here
-    return AutomatonKernel(module, identity, time.perf_counter() - t0), chunks
+    return AutomatonKernel(module, identity, time.perf_counter() - t0)
 
 
 def _job(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple, scheme: str) -> tuple:

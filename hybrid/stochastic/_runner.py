@@ -668,15 +668,17 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
             "expression of v"
         )
     scales = _scales(settings)
-    kern, job = _front.build(model, settings, scales["h_scale"], scales["v_scale"],
-                             (scales["x_scale"], scales["y_scale"]), sch.name)
-    settings["identity"] = {**kern.identity,
+    t0 = time.perf_counter()
+    job, identity = _front.plan(model, settings, scales["h_scale"], scales["v_scale"],
+                                (scales["x_scale"], scales["y_scale"]), sch.name)
+    settings["identity"] = {**identity,
                             "params": {k: float.hex(float(model.params[k])) for k in tuple(model.params)}}
     states = _rng.chunk_states(settings["seed"], settings["n_chunks"])
 
     stats = None
-    if ckdir is not None and resume:
+    if ckdir is not None and resume:  # before compiling: a checkpoint of another run must not cost a kernel build
         stats = _load_checkpoint(ckdir, settings)
+    kern = _front.compile_job(job, identity, t0)
     if stats is None:
         stats = EnsembleStatistics.empty(settings)
     stats.settings.update({k: v for k, v in settings.items() if k not in stats.settings})
