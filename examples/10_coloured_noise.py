@@ -137,7 +137,7 @@ def duffing_against_monte_carlo(t_end: float, quick: bool) -> bool:
     mc_e, mc_p = ens.density("H")
     l1 = float(np.abs(sd.bin_masses(edges) - mc_p * np.diff(mc_e)).sum())
     est = ens.mean("H")
-    coarse = sd._coarse[0].mean_energy  # the solve on the grid twice coarser: the solver's own E[H] error scale
+    coarse = sd._coarse_solve.mean_energy  # the solve on the grid twice coarser: the solver's own E[H] error scale
     good = abs(sd.mean_energy - est.value) <= 3 * est.ci / 1.96 + abs(sd.mean_energy - coarse)
     white = stationary_density_xy(duffing)
     print(f"3. OU-filtered Duffing impact oscillator (alpha = 1, D = 0.1, walls at +-0.6, r = 0.8): density solver "
