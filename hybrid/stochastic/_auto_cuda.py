@@ -48,7 +48,6 @@ PRECISIONS = ("f64", "f32")
 SHARED_CELLS = 12 * 1024
 """int32 cells of a block's shared histograms (48 KiB, the static shared memory of one block)."""
 INSTALL_HINT = 'pip install -e ".[cuda]"'
-MAX_LAUNCH_STEPS = 2**24
 
 
 # ---------------------------------------------------------------------------------------------------- availability
