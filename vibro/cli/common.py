@@ -187,22 +187,6 @@ def load_model(spec: str):
                          f"HybridAutomaton, or a function or class returning one (got {type(obj).__name__})")
 
 
-def load_model_class(spec: str):
-    """The oscillator model class of a built-in name (kept for callers that need the class itself).
-
-    Examples
-    --------
-    >>> load_model_class("duffing").__name__
-    'DuffingImpact'
-    """
-    from models import ImpactOscillator
-
-    obj, found = load_model(spec)
-    if isinstance(obj, type) and issubclass(obj, ImpactOscillator):
-        return obj
-    raise ParameterError(f"--model {spec}: {found}, not an ImpactOscillator subclass")
-
-
 def load_model_object(spec: str):
     """What ``--model`` names (see :func:`load_model`), without the words.
 
