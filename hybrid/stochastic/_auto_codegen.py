@@ -28,9 +28,9 @@ general event loop ``event_step``, and that after the lane loop, so that the loo
 stay live across the loop and push its numbers out of the registers). The statistics, and the joint histogram,
 run in lane loops of their own; one NaN test covers all observables of a sample; expressions of the parameters and
 the step are bound once before the loops. On Example 1 (``benchmarks/mc_throughput.py``, section 4) the kernel
-runs splitting at 1.18 and the explicit milstein at 0.95 of the oscillator kernel's throughput (0.47 and 0.25
-before these measures), and the oscillator front end at 0.98 (``symplectic``, with or without the joint histogram)
-and 1.11 (``baoab``, the oscillator's splitting).
+runs splitting at 1.18 and the explicit milstein at 0.95 of the oscillator kernel's throughput (that kernel has
+since been removed; 0.47 and 0.25 before these measures), and the oscillator front end at 0.98 (``symplectic``,
+with or without the joint histogram) and 1.11 (``baoab``, the oscillator's splitting).
 The figures move by a few per cent with changes that add live numbers to ``run_chunk``: measure, do not guess.
 """
 

@@ -480,8 +480,8 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     scheme : {'em', 'milstein', 'splitting', 'symplectic', 'baoab', 'naive'}
         Euler-Maruyama; Milstein (commutative noise); the mechanical splitting (kick, free flight of the
         positions with exact crossing location, noise, kick); the symplectic Milstein (the velocities' Milstein
-        step, then the free flight of the positions at the new velocities, crossings located exactly: the
-        oscillator kernel's ``milstein``); or BAOAB (kick by the force, half flight, the velocities' exact
+        step, then the free flight of the positions at the new velocities, crossings located exactly: what
+        the oscillator scheme ``milstein`` runs as); or BAOAB (kick by the force, half flight, the velocities' exact
         Ornstein-Uhlenbeck step, half flight, kick: weak order 2, for velocity drifts F(q, t) - c(q, t) v and
         noise free of the velocities). The last three need every state to be a position (d q/dt = v, no noise)
         or a velocity; they do not pump energy into lightly damped oscillators as the explicit em and milstein

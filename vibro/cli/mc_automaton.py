@@ -63,7 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def automaton_from_args(args):
-    """The automaton to simulate, or None when the oscillator engine runs the request (no automaton asked for).
+    """The automaton to simulate, or None when ``simulate_ensemble`` (the oscillator front end) runs the request.
 
     Parameters split in two: those of an oscillator model go to ``with_params`` (its own checks), the rest (filter
     parameters) become overrides that the automaton checks when the run resolves them.

@@ -6,7 +6,8 @@
 SCHEMES = ("em", "milstein", "naive", "splitting")
 """Names of ``hybrid.stochastic.SCHEMES``."""
 AUTOMATON_ONLY_SCHEMES = ("baoab", "symplectic")
-"""Names of ``hybrid.stochastic.AUTOMATON_SCHEMES`` that the oscillator kernels do not have."""
+"""Names of ``hybrid.stochastic.AUTOMATON_SCHEMES`` that are not oscillator scheme names (the front end runs them
+for ``milstein`` and ``splitting``)."""
 DENSITY_METHODS = ("chain", "exact-two-impact", "jump", "paper")
 """Names of ``averaging.METHODS``."""
 MODELS = ("duffing", "duffing-forced", "duffing-vdp", "rayleigh")
