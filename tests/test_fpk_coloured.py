@@ -90,6 +90,21 @@ def test_refusals():
         solve_coloured(DUFFING)
 
 
+def test_oversized_grid_refused_before_any_solve(monkeypatch):
+    """The requested grid's estimate is checked first: no white-noise or coarse solve runs for a grid then refused."""
+    import averaging.phase_plane.cartesian as cartesian
+    import averaging.phase_plane.coloured as coloured
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("a solve ran before the size check")
+
+    monkeypatch.setattr(cartesian, "stationary_density_cartesian", no_solve)
+    monkeypatch.setattr(coloured, "solve_coloured", no_solve)
+    # 48 x 48 x 32 needs about 0.33 GB, its coarse grid 24 x 24 x 16 about 0.04 GB: the limit lies between them
+    with pytest.raises(ParameterError, match="48 x 48 x 32 needs about"):
+        stationary_density_coloured(ou_filter(DUFFING, alpha=1.0), grid=(48, 48, 32), max_memory=1e8)
+
+
 def test_interface_and_params():
     sd = stationary_density_coloured(ou_filter(DUFFING, alpha=1.0), grid=(16, 16, 10), params={"alpha": 2.0},
                                      check=False, points=101)

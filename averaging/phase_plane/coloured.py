@@ -292,6 +292,14 @@ def _grid_triple(grid) -> tuple[int, int, int]:
     return nx, ny, nz
 
 
+def _check_grid_size(nx: int, ny: int, nz: int, max_memory: float) -> None:
+    """Refuse, with the estimate, a grid whose solve needs more than ``max_memory`` bytes."""
+    cells = float(nx) * float(ny + ny % 2) * nz
+    check_size(f"the coloured-noise grid {nx} x {ny} x {nz}", memory=cells * BYTES_PER_CELL, max_memory=max_memory,
+               detail=f"{cells:.3g} cells x {BYTES_PER_CELL} bytes, about {cells * SECONDS_PER_CELL:.3g} s",
+               fix=f"use a coarser grid (the default is {COLOURED_GRID})")
+
+
 def solve_coloured(model, grid=COLOURED_GRID, h_max: float = 4.0, *, params=None, walls="model", points: int = 2000,
                    start=None, max_memory: float | None = None) -> ColouredDensity:
     """One solve on one grid, no accuracy check: the lower-level entry of :func:`stationary_density_coloured`.
@@ -329,11 +337,7 @@ def solve_coloured(model, grid=COLOURED_GRID, h_max: float = 4.0, *, params=None
     from .solver import _coefficients
 
     nx, ny, nz = _grid_triple(grid)
-    cells = float(nx) * float(ny + ny % 2) * nz
-    check_size(f"the coloured-noise grid {nx} x {ny} x {nz}", memory=cells * BYTES_PER_CELL,
-               max_memory=MAX_MEMORY if max_memory is None else max_memory,
-               detail=f"{cells:.3g} cells x {BYTES_PER_CELL} bytes, about {cells * SECONDS_PER_CELL:.3g} s",
-               fix=f"use a coarser grid (the default is {COLOURED_GRID})")
+    _check_grid_size(nx, ny, nz, MAX_MEMORY if max_memory is None else max_memory)
     if not (np.isfinite(h_max) and h_max > 0):
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     if int(points) != points or points < 3:
@@ -419,9 +423,13 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
     >>> round(sd.mean_energy, 2), sd.error_estimate > 0
     (0.11, True)
     """
+    from hybrid.sizes import MAX_MEMORY
+
     from .cartesian import CARTESIAN_GRID, stationary_density_cartesian
+
     grid = COLOURED_GRID if grid is None else grid
     nx, ny, nz = _grid_triple(grid)
+    _check_grid_size(nx, ny, nz, MAX_MEMORY if max_memory is None else max_memory)  # before the white and coarse solves
     osc, *_ = _parts(model, params)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GridWarning)
@@ -463,7 +471,8 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
         warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of the box [min G, {h:.4g}]: raise h_max",
                       GridWarning, stacklevel=2)
     if coarse is None:
-        coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd)
+        coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd,
+                                max_memory=max_memory)
     sd._coarse_solve, sd._estimate_order = coarse, float(order)  # estimate_error on other bins
     est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101)) + tail
     sd.error_estimate = est
