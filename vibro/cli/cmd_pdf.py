@@ -125,7 +125,8 @@ def _check_resolved(args, sd, joint=None) -> None:
 def _grid(args, default):
     grid = tuple(args.grid) if args.grid is not None else default
     if min(grid) < 8 or grid[0] * grid[1] > 4_000_000:
-        raise ParameterError(f"--grid {grid[0]} {grid[1]}: use at least 8 and at most 4e6 cells in all")
+        raise ParameterError(f"--grid {grid[0]} {grid[1]}: use at least 8 cells in each direction and at most 4e6 "
+                             "in all")
     return grid
 
 
