@@ -44,7 +44,21 @@ def lambdify_numeric(args, expr, **kwargs):
 
     Start-up matters on the command line: lambdify's ``"numpy"`` runs ``from numpy import *``, which loads numpy's
     lazy submodules (f2py, testing, random, ma: about 0.1 s), and ``"scipy"`` imports scipy.special (0.1-0.2 s).
-    Passing the numpy module itself prints the same code without either. ``kwargs`` go to ``sympy.lambdify``.
+    Passing the numpy module itself prints the same code without either.
+
+    Parameters
+    ----------
+    args : sequence of sympy.Symbol
+        The function's arguments, in order.
+    expr : sympy expression, or a list or tuple of them
+        What it evaluates.
+    **kwargs
+        Passed to ``sympy.lambdify``.
+
+    Returns
+    -------
+    callable
+        A function of ``args`` that takes arrays.
 
     Examples
     --------

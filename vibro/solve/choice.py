@@ -322,6 +322,19 @@ def multiwell_choice(model, tol: float, why: str) -> Choice | None:
     and the grid refined while it misses. Energies start at min G (negative between the wells of a double well),
     so the L1 bins cover [min G, h_max]. None (Monte Carlo) for other models, e.g. nonlinear damping.
 
+    Parameters
+    ----------
+    model : ImpactOscillator
+        The model (None for a single well, a forced model, or damping or noise not of the form above).
+    tol : float
+        The L1 accuracy asked of p(H).
+    why : str
+        Why the single-well methods do not apply (kept in the choice's reasons).
+
+    Returns
+    -------
+    Choice or None
+
     Examples
     --------
     >>> from models import ImpactOscillator

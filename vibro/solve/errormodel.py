@@ -76,6 +76,19 @@ RATING_SHIFT = 1e-4
 def rating_features(r_imp: float, r_damp: float, self_excited: bool, linear_damping: bool) -> tuple:
     """The features of :data:`RATING_FEATURES` (the quasi-linear class: linear damping, not self-excited).
 
+    Parameters
+    ----------
+    r_imp, r_damp : float
+        The model's impact and damping ratios (see :mod:`vibro.solve.diagnostics`).
+    self_excited, linear_damping : bool
+        The model's damping class.
+
+    Returns
+    -------
+    tuple of float
+        log(r_imp + shift), log(r_damp + shift), the two class flags, and the two logs again in the quasi-linear
+        class (0 outside it).
+
     Examples
     --------
     >>> [round(v, 3) for v in rating_features(0.1, 0.2, False, True)]
