@@ -92,8 +92,9 @@ def run(args) -> int:
     plan = plan_outputs(args)  # every path checked before the run, not after it
     if not (0 < args.max_memory_gb < float("inf")):
         raise ParameterError(f"--max-memory-gb {args.max_memory_gb:g} must be a positive number of GB")
-    if not 1 <= args.threads_per_block <= 1024:
-        raise ParameterError(f"--threads-per-block {args.threads_per_block} must lie in 1-1024 (a CUDA block)")
+    if not (32 <= args.threads_per_block <= 1024 and args.threads_per_block % 32 == 0):
+        raise ParameterError(f"--threads-per-block {args.threads_per_block} must be a multiple of 32 in [32, 1024] "
+                             "(whole warps of a CUDA block)")
     if args.resume and args.checkpoint is None:
         raise ParameterError("--resume needs --checkpoint DIR")
     if args.snapshots:  # the ensemble at fixed times from the start: recorded from t = 0
