@@ -7,10 +7,11 @@ ring solver (:class:`~averaging.phase_plane.solver.PhaseDensity`: p(H), the join
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
-from hybrid.errors import ParameterError
+from hybrid.errors import NormalisationError, ParameterError
 from hybrid.sizes import check_size
 
 from ..stationary import output_grid
@@ -25,7 +26,7 @@ from ._cartesian import (
 )
 from ._core import null_vector
 from ._monotone import MonotoneCubic
-from .solver import BYTES_PER_CELL, SECONDS_PER_CELL, PhaseDensity, _coefficients, _walls, grid_pair
+from .solver import BYTES_PER_CELL, SECONDS_PER_CELL, GridWarning, PhaseDensity, _coefficients, _walls, grid_pair
 
 CARTESIAN_GRID = (120, 120)
 """(cells in x, cells in y): L1 about 1e-5 of the joint density on the bistable Duffing benchmark (D/c = 0.5)."""
@@ -294,9 +295,7 @@ def stationary_density_cartesian(model, grid=None, h_max: float = 4.0, *, walls=
     >>> sd.scheme, round(sd.mean_energy, 3)
     ('cartesian', -0.477)
     """
-    import warnings
-
-    from .solver import FIT_TAIL, GridWarning, NormalisationError, _l1_bins
+    from .solver import FIT_TAIL, _l1_bins
 
     grid = CARTESIAN_GRID if grid is None else grid
     h = float(h_max)
@@ -310,22 +309,10 @@ def stationary_density_cartesian(model, grid=None, h_max: float = 4.0, *, walls=
             break
         h = sd.h_min + 1.25 * (top - sd.h_min)
         sd = solve_cartesian(model, grid, h, walls, restitution, 3)
-    if h < h_max:
-        sd.h_max = float(h_max)
-        sd.H = sd.h_min + output_grid(h - sd.h_min, float(h_max) - sd.h_min, int(points))
-        sd.p = sd.density(sd.H)
+    report_up_to(sd, h, h_max, points)
     if not check:
         return sd
-    rho = sd.ring_mass / np.diff(sd.H_faces)
-    if rho[-1] > 0.2 * rho.max():
-        raise NormalisationError(
-            f"p(H) does not decay towards h_max={h_max:g} (p(h_max)/max p = {rho[-1] / rho.max():.2g}): the energy "
-            "grows without bound (no confinement) or h_max is far too small; raise h_max or add dissipation")
-    centre = 0.5 * (sd.H_faces[1:] + sd.H_faces[:-1])
-    tail = float(sd.ring_mass[centre > sd.h_min + 0.9 * (h - sd.h_min)].sum())
-    if tail > 1e-4:
-        warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of [min G, h_max={h_max:g}]: raise h_max",
-                      GridWarning, stacklevel=3)
+    box_top_mass(sd, h, stacklevel=4)
     coarse = solve_cartesian(model, (max(8, grid[0] // 2), max(8, grid[1] // 2)), h, walls, restitution, 3)
     est = _l1_bins(sd, coarse) / (2.0**order - 1.0)
     sd.error_estimate = est
@@ -337,3 +324,28 @@ def stationary_density_cartesian(model, grid=None, h_max: float = 4.0, *, walls=
         warnings.warn(f"grid {tuple(grid)} too coarse: estimated L1 error of p(H) {est:.2g} > tol={tol:g} "
                       "(from the solve on a grid twice coarser); refine the grid", GridWarning, stacklevel=3)
     return sd
+
+
+def report_up_to(sd, h: float, h_max: float, points: int) -> None:
+    """Report p(H) of ``sd``, solved in the box [min G, h], on [min G, h_max] when the box stops below h_max."""
+    if h < h_max:
+        sd.h_max = float(h_max)
+        sd.H = sd.h_min + output_grid(h - sd.h_min, float(h_max) - sd.h_min, int(points))
+        sd.p = sd.density(sd.H)
+
+
+def box_top_mass(sd, h: float, stacklevel: int = 3) -> float:
+    """The probability in the top tenth of the box [min G, h] of ``sd``: refuse a p(H) that does not decay towards
+    h, warn (:class:`GridWarning`) when that tenth holds more than 1e-4."""
+    rho = sd.ring_mass / np.diff(sd.H_faces)
+    if rho[-1] > 0.2 * rho.max():
+        raise NormalisationError(
+            f"p(H) does not decay towards the top of the box h = {h:.4g} (p(h)/max p = {rho[-1] / rho.max():.2g}): "
+            "the energy grows without bound (no confinement) or h_max is far too small; raise h_max or add "
+            "dissipation")
+    centre = 0.5 * (sd.H_faces[1:] + sd.H_faces[:-1])
+    tail = float(sd.ring_mass[centre > sd.h_min + 0.9 * (h - sd.h_min)].sum())
+    if tail > 1e-4:
+        warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of the box [min G, {h:.4g}]: raise h_max",
+                      GridWarning, stacklevel=stacklevel)
+    return tail

@@ -435,7 +435,7 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
     """
     from hybrid.sizes import MAX_MEMORY
 
-    from .cartesian import CARTESIAN_GRID, stationary_density_cartesian
+    from .cartesian import CARTESIAN_GRID, box_top_mass, report_up_to, stationary_density_cartesian
 
     grid = COLOURED_GRID if grid is None else grid
     nx, ny, nz = _grid_triple(grid)
@@ -471,22 +471,10 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
         h, coarse = fitted, None
     sd = solve_coloured(model, (nx, ny, nz), h, params=params, walls=walls, points=points, max_memory=max_memory,
                         start=coarse)
-    if h < h_max:
-        from ..stationary import output_grid
-
-        sd.h_max = float(h_max)
-        sd.H = sd.h_min + output_grid(h - sd.h_min, float(h_max) - sd.h_min, int(points))
-        sd.p = sd.density(sd.H)
+    report_up_to(sd, h, h_max, points)
     if not check:
         return sd
-    rho = sd.ring_mass / np.diff(sd.H_faces)
-    if rho[-1] > 0.2 * rho.max():
-        raise NormalisationError(f"p(H) does not decay towards the top of the box (h = {h:.4g}): raise h_max")
-    centre = 0.5 * (sd.H_faces[1:] + sd.H_faces[:-1])
-    tail = float(sd.ring_mass[centre > sd.h_min + 0.9 * (h - sd.h_min)].sum())
-    if tail > 1e-4:
-        warnings.warn(f"{tail:.2g} of the probability lies in the top 10% of the box [min G, {h:.4g}]: raise h_max",
-                      GridWarning, stacklevel=2)
+    tail = box_top_mass(sd, h)
     if coarse is None:
         coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd,
                                 max_memory=max_memory)
