@@ -479,6 +479,7 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
         coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd,
                                 max_memory=max_memory)
     sd._coarse_solve, sd._estimate_order = coarse, float(order)  # estimate_error on other bins
+    sd.tail_mass = tail
     est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101)) + tail
     sd.error_estimate = est
     sd.error_method = (f"two grids: L1(p on {(nx, ny, nz)}, p on {coarse_grid}) / (2**{order:g} - 1) (Richardson) "

@@ -191,7 +191,10 @@ class PeriodicDensity:
         self.iterations = 0
         self.factors = 0
         self.error_estimate = None
+        self.grid_estimate = None
+        self.time_estimate = None
         self.time_correction = None
+        self._check = None
 
     # ------------------------------------------------------------------ sections
     def _section(self, p, k):
@@ -283,12 +286,55 @@ class PeriodicDensity:
                                             "density": d}))
         return pd.concat(frames, ignore_index=True)
 
+    def estimate_parts(self, edges, phases: int | None = None, average: bool = False):
+        """(grid, time) estimates of the L1 error of p(H | t) on the energy bins ``edges``, worst over ``phases``
+        sections k T / phases (default: those of the check), or of the time-averaged p(H) with ``average``.
+
+        grid: the L1 between this solve and the check's on the grid twice coarser (same steps), over 3 (order 2:
+        conservative, the Cartesian cells converge at order 2 next to an inelastic wall and faster elsewhere).
+        time: on the check's grid, the L1 between the result at the steps K and the same scheme at K / 2, over 3
+        (order 2 assumed: the Richardson combination's order rises from 2 to 4 as the steps shrink, so this
+        overestimates, 2-6 times in docs/results/fpk-forced.md); its cells' error cancels in the difference.
+        Needs ``check=True`` (else :class:`~hybrid.errors.ParameterError`).
+
+        Examples
+        --------
+        >>> from models import ForcedDuffingImpact
+        >>> pd_ = periodic_density_xy(ForcedDuffingImpact(), grid=(24, 48), steps=8, l1_tol=1.0)
+        >>> grid, time = pd_.estimate_parts(np.linspace(0.0, 2.0, 41), average=True)
+        >>> bool(0 < grid < 1 and 0 < time < 1)
+        True
+        """
+        check = getattr(self, "_check", None)
+        if check is None:
+            raise ParameterError("no error estimate: the density was solved with check=False")
+        coarse, half, default = check
+        edges = np.asarray(edges, dtype=float)
+
+        def gap(a, b, k, pick=None):
+            if average:
+                return float(np.abs(a.mean.bin_masses(edges) - b.mean.bin_masses(edges)).sum())
+            times = a.phase_times(k) if pick is None else pick
+            return max(float(np.abs(a.section(t).bin_masses(edges) - b.section(t).bin_masses(edges)).sum())
+                       for t in times)
+
+        k = default if phases is None else _count("phases", phases)
+        grid = gap(self, coarse, k) / 3.0
+        if half is None:
+            return grid, None
+        # the times both runs store: the half run's steps that are also sections asked for (or 8 of them)
+        common = int(np.gcd(len(half.times), k))
+        if common < min(k, 4):
+            common = min(8, len(half.times))
+        return grid, gap(coarse, half, common, half.phase_times(common)) / 3.0
+
     def metadata(self) -> dict:
         """Method, model, grid, period and summary statistics (JSON-friendly)."""
         return {**self.mean.metadata(), "period": self.period, "steps": len(self.times),
                 "mean_energy": self.mean_energy, "impact_rate": self.impact_rate, "periodicity": self.periodicity,
                 "conservation": self.conservation, "gmres_iterations": self.iterations, "factors": self.factors,
-                "cells": self.cells, "error_estimate": self.error_estimate, "time_correction": self.time_correction}
+                "cells": self.cells, "error_estimate": self.error_estimate, "grid_estimate": self.grid_estimate,
+                "time_estimate": self.time_estimate, "time_correction": self.time_correction}
 
     def __repr__(self) -> str:
         return (f"PeriodicDensity(model={self.model.name!r}, method='fpk', cells={self.grid.n}, "
@@ -478,7 +524,8 @@ class ExtrapolatedPeriodicDensity(PeriodicDensity):
         self.factors = fine.factors + coarse.factors
         self.timing = {k: fine.timing[k] + coarse.timing[k] for k in fine.timing}
         self.cells, self._plane = fine.cells, fine._plane
-        self.error_estimate = None
+        self.error_estimate = self.grid_estimate = self.time_estimate = None
+        self._check = None
         self.time_correction = fine.time_correction
 
     def cells_at(self, t):
@@ -612,11 +659,16 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     plane_of, default, axes, least = PLANES[cells]
     n1, n2 = grid_pair(default if grid is None else grid, axes, least)
     steps = _count("steps", steps)
+    unit = 1
     if phases is not None:
         phases = _count("phases", phases)
-        steps = phases * -(-steps // phases)
-    if steps < 4:
-        raise ParameterError(f"steps={steps} must be at least 4 per period")
+        unit = phases
+    if check and unit % 2:
+        unit *= 2  # the time estimate runs at half the steps
+    steps = unit * -(-steps // unit)
+    if steps < (8 if check else 4):
+        raise ParameterError(f"steps={steps} must be at least {8 if check else 4} per period"
+                             + (" (the check's time estimate runs at half the steps)" if check else ""))
     if int(points) != points or points < 3:
         raise ParameterError(f"points={points!r} must be an integer >= 3")
     if scheme not in SCHEMES:
@@ -641,7 +693,7 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     left, right = _walls(model, walls)
     drift = lambdify_numeric((X, Y, T), model.substitute(model.ito_drift))
 
-    def solve_on(h, n1, n2):
+    def solve_on(h, n1, n2, probe=False):
         t0 = time.perf_counter()
         plane = plane_of(model, free, law, h, n1, n2, left, right)
         fine = 2 * steps if scheme == "richardson" else steps
@@ -679,6 +731,20 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         if scheme == "richardson":
             w = plane.mass_weight
             out.time_correction = float(np.max(np.abs(runs[1][0][::2] - snapshots) @ w))
+        if probe:
+            # the same scheme at half the steps, for the time error: Richardson takes Crank-Nicolson at K / 2 with
+            # the K run it already has; a single scheme runs again at K / 2
+            half = steps // 2
+            if scheme == "richardson":
+                slow = _fixed_point(plane, operators[::4], drifts[::4], 4 * dt, "cn", runs[0][0][0], tol,
+                                    max_iterations)
+                probe_p = (4.0 * runs[0][0][::2] - slow[0]) / 3.0
+            else:
+                slow = _fixed_point(plane, operators[::2], drifts[::2], 2 * dt, scheme, snapshots[0], tol,
+                                    max_iterations)
+                probe_p = slow[0]
+            out.half_steps = PeriodicDensity(model, plane, period * np.arange(half) / half, period, probe_p,
+                                             operators[::len(operators) // half], points, h_max)
         return out
 
     # the cells on the energies the unforced density reaches (e**-40 below its peak), doubled for the forcing's
@@ -712,20 +778,23 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     if not (check or extrapolate):
         return out
     lo1, lo2 = max(least[0], n1 // 2), max(least[1], n2 // 2)
-    coarse = solve_on(h, lo1, lo2)
-    # the L1 of p(H | t) between the grids, at the phases asked for (8 without), on 100 bins of the energy range
-    k = phases or 8
+    coarse = solve_on(h, lo1, lo2, probe=check)
+    out._check = (coarse, getattr(coarse, "half_steps", None), phases or 8)
+    # the L1 of p(H | t) at the phases asked for (8 without), on 100 bins of the energy range
     edges = np.linspace(out.mean.h_min, out.grid.h_max, 101)
-    gap = max(float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
-              for a, b in zip(out.sections(k), coarse.sections(k)))
-    estimate = gap / 3.0
+    parts = out.estimate_parts(edges)
     if extrapolate:
         out = ExtrapolatedPeriodicDensity(out, coarse)
+        out._check = None  # the estimate is the fine grid's (the extrapolation is not estimated on its own)
+    out.grid_estimate, out.time_estimate = parts
+    estimate = parts[0] + (parts[1] or 0.0)
     out.error_estimate = estimate
     out.mean.error_estimate = estimate
     if check and estimate > l1_tol:
-        warnings.warn(f"grid {(n1, n2)} too coarse: estimated L1 error of p(H | t) {estimate:.2g} > "
-                      f"l1_tol={l1_tol:g} (from the solve on the grid {(lo1, lo2)}); refine the grid",
+        space = parts[0] >= (parts[1] or 0.0)
+        what = (f"grid {(n1, n2)} (estimate {parts[0]:.2g}, from the solve on {(lo1, lo2)}): refine the grid" if space
+                else f"{steps} steps per period (estimate {parts[1]:.2g}, from a run at {steps // 2}): raise steps")
+        warnings.warn(f"estimated L1 error of p(H | t) {estimate:.2g} > l1_tol={l1_tol:g}, mostly from the {what}",
                       GridWarning, stacklevel=2)
     return out
 
