@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from averaging.phase_plane import forced as F  # noqa: E402
 from hybrid.automaton import lambdify_numeric  # noqa: E402
-from models import X, Y, ForcedDuffingImpact, ImpactOscillator, Newton  # noqa: E402
+from models import ForcedDuffingImpact, ImpactOscillator, Newton, X, Y  # noqa: E402
 from models.oscillator import T  # noqa: E402
 
 PHASES = 8

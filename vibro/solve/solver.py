@@ -274,8 +274,16 @@ def _escalate(choice: Choice, estimated: float, tol: float, parts=None) -> Choic
     """The next run after a miss: a finer fpk grid (for a forced model, finer cells or more time steps, whichever
     part of the estimate, ``parts`` = (cells, time), misses half of tol), or the next method of :data:`LADDER`
     (None: nothing left)."""
-    from .choice import (COLOURED_GRIDS, FORCED_GRIDS, FORCED_STEPS, FPK_GRIDS, coloured_cost, forced_cost,
-                         fpk_cost, fpk_grid_for)
+    from .choice import (
+        COLOURED_GRIDS,
+        FORCED_GRIDS,
+        FORCED_STEPS,
+        FPK_GRIDS,
+        coloured_cost,
+        forced_cost,
+        fpk_cost,
+        fpk_grid_for,
+    )
 
     preds = choice.predictions
     scheme = choice.settings.get("scheme")
