@@ -5,7 +5,8 @@ Crank-Nicolson density at K steps per period. Its time error is measured here ag
 and 256 steps) on the same cells, so that the cells' error cancels: the L1 of p(H | t) on 100 bins of the energy
 range, worst of 8 phases. The estimate is |R_K - R_K/2| / 3 (order 2 assumed: conservative for a combination
 whose order rises from 2 to 4 as dt falls), on the same cells and on the cells twice coarser (where the solver
-computes it: the check's grid).
+computes it: the check's grid). The whole estimate (cells + time steps) of ``periodic_density_xy`` is also
+compared with the true error of the linear case, from its closed form.
 
 Models: example 08's forced Duffing impact oscillator (D = 0.02, Newton r = 0.8, walls at +-1; cells (60, 120) and
 (30, 60)) and the linear oscillator without walls (c = 0.5, W = 1.3, A = 0.4, D = 0.05; (32, 32) and (16, 16)).
@@ -81,12 +82,38 @@ def study(label, model, h, fine, coarse, ks, ref_k):
               f"{rich[coarse]['cpu'][K // 2]:.1f}", flush=True)
 
 
+def total_linear(lin, runs):
+    """The whole estimate (cells + time steps) of ``periodic_density_xy`` against the closed form: 2 c H / D is
+    noncentral chi-square at every section (L1 of p(H | t) on 100 bins of its range, worst of 8 phases)."""
+    from scipy.stats import ncx2
+
+    c, A, W, D = (lin.params[k] for k in ("c", "A", "W", "D"))
+    z = A / (1.0 - W**2 + 1j * c * W)
+    print("linear oscillator, the whole estimate against the closed form (L1 of p(H | t), 100 bins, worst of 8 "
+          "phases)")
+    print("   grid       K + 2K    cells     time      estimate  true      estimate / true  CPU s")
+    for grid, K in runs:
+        t0 = time.process_time()
+        sol = F.periodic_density_xy(lin, grid=grid, steps=K, h_max=3.0, phases=8, l1_tol=1.0)
+        cpu = time.process_time() - t0
+        edges = np.linspace(0.0, sol.grid.h_max, 101)
+        true = 0.0
+        for t, s in zip(sol.phase_times(8), sol.sections(8)):
+            xp, yp = (z * np.exp(1j * W * t)).real, (1j * W * z * np.exp(1j * W * t)).real
+            exact = np.diff(ncx2.cdf(2.0 * edges * c / D, 2, (xp**2 + yp**2) * c / D))
+            true = max(true, float(np.abs(s.bin_masses(edges) - exact).sum()))
+        print(f"   {str(grid):10s} {K:3d} + {2 * K:3d}  {sol.grid_estimate:.2e}  {sol.time_estimate:.2e}  "
+              f"{sol.error_estimate:.2e}  {true:.2e}  {sol.error_estimate / true:6.2f}           {cpu:.1f}", flush=True)
+
+
 def main(quick: bool) -> None:
     lin = ImpactOscillator("x", "c*y", forcing="A*cos(W*t)", barriers=None,
                            parameters={"c": 0.5, "A": 0.4, "W": 1.3, "D": 0.05})
-    study("linear oscillator, no walls", lin, 3.0, (32, 32), (16, 16), (16, 32, 64), 128)
+    total_linear(lin, [((24, 24), 16), ((32, 32), 16), ((32, 32), 32), ((48, 48), 16), ((48, 48), 32),
+                       ((64, 64), 64)][:3 if quick else None])
     if quick:
         return
+    study("linear oscillator, no walls", lin, 3.0, (32, 32), (16, 16), (16, 32, 64), 128)
     duff = ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=0.02)
     h = F.periodic_density_xy(duff, grid=(30, 60), steps=8, scheme="cn", check=False).grid.h_max
     study("example 08, D = 0.02", duff, h, (60, 120), (30, 60), (16, 32, 64), 128)
