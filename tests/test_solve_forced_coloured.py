@@ -87,7 +87,7 @@ def test_solve_on_example_10s_ou_duffing_is_within_tol_of_monte_carlo():
 
 
 def test_solve_refuses_a_band_pass_filter_in_one_line():
-    with pytest.raises(ModelError, match="4-D density.*vibro mc"):
+    with pytest.raises(ModelError, match="4-D.*vibro mc"):
         solve(bandpass_filter(DuffingImpact(), zeta=0.5, omega_f=1.0), 0.05)
 
 
@@ -102,3 +102,17 @@ def test_solve_on_example_08_meets_tol_against_monte_carlo_and_escalates():
         mean = float(np.abs(sol.result.mean.bin_masses(edges) - ref.mean(axis=0)).sum())
         assert mean <= tol
     assert len(sol.attempts) > 1  # 0.01 is met after refining the cells or the steps
+
+
+def test_cli_solve_filter_ou_and_forced_dry_run(tmp_path, capsys):
+    from vibro.cli import main
+
+    out = tmp_path / "p.csv"
+    rc = main(["solve", "--filter", "ou", "--param", "alpha=1", "--param", "c=0.2", "--param", "D=0.1", "--param",
+               "delta=0.6", "--restitution", "newton:e=0.8", "--tol", "0.05", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0 and out.exists() and "method: fpk" in text and "coloured fpk on" in text
+    rc = main(["solve", "--model", "duffing-forced", "--param", "D=0.02", "--tol", "0.05", "--dry-run"])
+    text = capsys.readouterr().out
+    assert rc == 0 and "method: fpk" in text and "scheme=forced" in text
+    assert main(["solve", "--filter", "ou", "--phases", "4", "--tol", "0.05"]) == 2  # one line, no run

@@ -101,7 +101,11 @@ def run(args) -> int:
     if args.phases is not None and (args.phases < 1 or not getattr(model, "is_forced", False)):
         raise ParameterError(f"--phases {args.phases}: give a number of phases >= 1, for a forced model")
     osc = model.oscillator if args.filter else model
-    print(f"model: {osc!r}" + (f" under an OU filter, alpha = {model.params['alpha']:g}" if args.filter else ""))
+    if args.filter:
+        alpha = model.resolve_parameters()[model.filter["parameters"]["alpha"]]
+        print(f"model: {osc!r} under an OU filter, alpha = {alpha:g}")
+    else:
+        print(f"model: {osc!r}")
     from vibro.provenance import noise_assumption
 
     print(f"noise: {noise_assumption(model)['text']}")
