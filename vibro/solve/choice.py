@@ -326,7 +326,7 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
 
 
-FORCED_GRIDS = ((30, 60), (40, 80), (60, 120), (80, 160))
+FORCED_GRIDS = ((30, 60), (40, 80), (60, 120), (64, 128), (80, 160))
 """The Cartesian grids (cells in x, cells in y) ``solve`` takes the forced fpk on, coarsest first."""
 FORCED_STEPS = (16, 32, 64, 128)
 """The time steps per forcing period (the result's; Crank-Nicolson also runs twice as many) ``solve`` escalates."""
@@ -370,6 +370,14 @@ def forced_choice(model, tol: float) -> Choice | str:
     time_pred = {16: 0.02, 32: 0.005, 64: 6e-4, 128: 4e-5}
     grid = _first_meeting(FORCED_GRIDS, grid_pred, tol / 2.0)
     steps = _first_meeting(FORCED_STEPS, time_pred, tol / 2.0)
+    from averaging.phase_plane.forced import BYTES_PER_CELL_FACTOR
+    from hybrid.sizes import MAX_MEMORY
+
+    def memory(g, k):  # the forced solver's own estimate (check included)
+        return g[0] * g[1] * BYTES_PER_CELL_FACTOR["cartesian"] * (k // 2 + 1) * 3 * 1.25
+
+    while memory(grid, steps) > MAX_MEMORY and grid != FORCED_GRIDS[0]:  # start where it fits; solve escalates
+        grid = FORCED_GRIDS[FORCED_GRIDS.index(grid) - 1]
     expected = grid_pred[grid] + time_pred[steps]
     why = (f"the model is forced (F = {model.forcing}): the averaging methods need a model without time dependence, "
            f"so the phase-plane FPK solver of the periodic density (Cartesian cells {grid}, Crank-Nicolson at "

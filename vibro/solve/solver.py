@@ -195,7 +195,9 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
         choice.settings["h_max"] = float(h_max)  # the user's range (multiwell_choice saw no diagnostics)
     h_max = choice.settings.get("h_max", choice.diagnostics.h_max)
     edges = np.linspace(choice.settings.get("h_min", 0.0), h_max, L1_BINS + 1)  # h_min < 0 between two wells
-    if choice.method == "monte-carlo":
+
+    def run_monte_carlo(choice):
+        """The planned Monte Carlo run of ``choice``, extended while its two halves miss tol."""
         from hybrid.stochastic import simulate_ensemble
 
         s = choice.settings
@@ -223,7 +225,7 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
             choice.reason += f"; extended {extensions}x after the two halves measured a larger error"
         if stat + bias > tol:
             warnings.warn(f"Monte Carlo measured L1 error {stat + bias:.3g} > tol={tol:g} within max_cost "
-                          f"(halves of {a.paths} paths); raise max_cost", stacklevel=2)
+                          f"(halves of {a.paths} paths); raise max_cost", stacklevel=3)
         stats = a.merge(b)
         centres = 0.5 * (stats.h_edges[1:] + stats.h_edges[:-1])
         masses = rebin_counts(stats.h_counts, L1_BINS)
@@ -233,6 +235,9 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
         return Solution(centres, p, edges, masses, choice, time.perf_counter() - t0, est, stats,
                         f"half the L1 between two independent halves ({a.paths} paths each) plus the {s['scheme']} "
                         f"bias constant x dt**{scheme_order(s['scheme']):g}", [("monte-carlo", dict(s), est)])
+
+    if choice.method == "monte-carlo":
+        return run_monte_carlo(choice)
     from hybrid.sizes import SizeError
 
     attempts, last, parts = [], None, None
@@ -240,6 +245,10 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
         try:
             sd, estimated, source = _run_deterministic(model, choice, h_max, edges, points, warn=forced)
         except SizeError as exc:  # an escalated grid refused for its memory: keep the last run, say why
+            if last is None and choice.settings.get("scheme") == "forced" and monte_carlo and not forced:
+                # the forced fpk cannot hold this tolerance in memory: Monte Carlo instead
+                return run_monte_carlo(mc_choice(model, tol, None, f"{choice.reason}; but {exc}", {}, max_cost, True,
+                                                 seed))
             if last is None:
                 raise
             warnings.warn(f"{choice.method} {choice.settings.get('grid')} refused ({exc}); kept the previous run",
