@@ -13,7 +13,7 @@ Cases and references (the true L1 on solve's own 40 bins where a closed form exi
   noise 0.0004).
 
 CPU is ``time.process_time`` of ``solve`` in this process (2 shared cores). Run: ``python
-benchmarks/solve_forced_coloured.py [--quick]``.
+benchmarks/solve_forced_coloured.py [--quick] [--only=forced|coloured]``.
 """
 
 from __future__ import annotations
@@ -100,9 +100,11 @@ def example_10():
     return fpk_coloured.model(), true
 
 
-def main(quick: bool) -> None:
+def main(quick: bool, only: str | None = None) -> None:
     cases = [("linear forced (closed form)", linear_forced), ("example 08, D = 0.02 (Monte Carlo)", example_08),
              ("linear, OU alpha = 2 (Lyapunov)", linear_ou), ("example 10, OU alpha = 1 (Monte Carlo)", example_10)]
+    if only is not None:  # "forced" or "coloured"
+        cases = cases[:2] if only == "forced" else cases[2:]
     tols = (0.05, 0.02) if quick else (0.05, 0.02, 0.01)
     print("| case | tol | method, settings | estimated L1 | true L1 | reference noise | CPU s | escalation |")
     print("|---|---|---|---|---|---|---|---|")
@@ -125,4 +127,4 @@ def main(quick: bool) -> None:
 
 
 if __name__ == "__main__":
-    main("--quick" in sys.argv)
+    main("--quick" in sys.argv, next((a.split("=")[1] for a in sys.argv if a.startswith("--only=")), None))
