@@ -40,17 +40,19 @@ and their coupling makes the blocks dense. The period map needs one sparse LU pe
 once and reused by every GMRES iteration; a forcing A cos(Omega t + phi) takes each value twice per period, so
 about K/2 factors are computed per run (the matrices are keyed by the drift they hold).
 
-Error estimate. With ``check`` (default) the same problem is solved on the grid twice coarser, and the L1 of
-p(H | t) between the two, over 3 (order 2, conservative), is ``error_estimate``; a :class:`GridWarning` says when it
-exceeds ``l1_tol``. Both grids take the same steps, so this is the error of the cells alone: it does not see the
-time error. ``time_correction`` is the size of the time extrapolation, i.e. the time error of the 2K-step
-Crank-Nicolson run (L1 of the cell densities): an upper bound on the time error of the combination, which is
-reported but not checked against ``l1_tol``; ``scheme="cn"`` and ``"bdf2"`` carry no time error estimate at all.
+Error estimate. With ``check`` (default), ``error_estimate`` = ``grid_estimate`` + ``time_estimate`` (L1 of
+p(H | t) on 100 bins, worst phase), and a :class:`GridWarning` names the larger part when the sum exceeds ``l1_tol``.
+The cells' part: the same problem solved on the grid twice coarser (same steps), the L1 between the two over 3
+(order 2, conservative). The time steps' part: on that coarser grid, the same scheme at half the steps, the L1
+between the results at K and K/2 over 3 (order 2 assumed for a combination whose observed order is 2.9-3.8: it
+bounded the time error by 1.1-6 times on example 08 and the linear oscillator, docs/results/fpk-forced.md); the
+cells' error cancels in that difference. ``time_correction`` (the L1 of the cell densities between Crank-Nicolson
+alone at 2K steps and the combination) is still reported.
 
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): on example 08 (D = 0.02) the L1 of p(H | t)
-against converged Monte Carlo (noise 0.0022) is 0.0031 mean and 0.0050 worst over 16 phases at the default grid
-(60, 120) with 32 + 64 steps, in 19-22 s CPU and 1.3 GB; the linear oscillator's section means and variances are
-within 2e-5 and 4.5e-4 of the closed form.
+against converged Monte Carlo (noise 0.0022) is 0.0028 mean and 0.0045 worst over 16 phases at the default grid
+(64, 128) with 64 + 128 steps (estimate 0.0045), in 45-47 s CPU and 2.6 GB; the linear oscillator's section means
+and variances are within 2.3e-6 and 3.5e-5 of the closed form at 64 + 128 steps.
 
 Outputs (:class:`PeriodicDensity`): the density at any time of the period (``section(t)``, a
 :class:`~averaging.phase_plane.PhaseDensity` with p(H | t), p(x, y | t), marginals and impacts; between the K
@@ -146,8 +148,11 @@ class PeriodicDensity:
     cells : str
         ``"cartesian"`` or ``"rings"``.
     error_estimate : float or None
-        Estimated L1 error of p(H | t) on 100 bins (the largest over the phases), from the solve on the grid twice
-        coarser with the same steps (``check=True``): the error of the cells only, not of the time steps.
+        Estimated L1 error of p(H | t) on 100 bins (the largest over the phases), ``grid_estimate`` +
+        ``time_estimate`` (``check=True``).
+    grid_estimate, time_estimate : float or None
+        The cells' part (the solve on the grid twice coarser, same steps) and the time steps' part (on that grid,
+        the same scheme at half the steps); :meth:`estimate_parts` gives them on other bins or phases.
     time_correction : float or None
         max over the stored times of the L1 (cell densities) between the 2K-step run and the extrapolated density
         (``scheme="richardson"``; None otherwise): the time error of Crank-Nicolson alone at 2K steps, an upper
@@ -607,10 +612,10 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         fourth order, the time error of a section's moments falls from 8e-3 to 5e-4 on the linear oscillator),
         Crank-Nicolson alone, or BDF2 (L-stable, larger error).
     check : bool
-        Also solve on the grid twice coarser (same steps) and estimate the L1 error of p(H | t) on 100 bins due to
-        the cells (not the time steps: see ``time_correction``) from the two (``error_estimate``, order 2 assumed:
-        conservative, the Cartesian scheme converges at order 2 next to an inelastic wall and faster elsewhere);
-        warn (:class:`GridWarning`) when it exceeds ``l1_tol``.
+        Also solve on the grid twice coarser (same steps, and again at half the steps) and estimate the L1 error of
+        p(H | t) on 100 bins: the cells' part from the two grids and the time steps' part from the two step counts
+        (``error_estimate`` = ``grid_estimate`` + ``time_estimate``, order 2 assumed for both: conservative);
+        warn (:class:`GridWarning`) when it exceeds ``l1_tol``. Makes ``steps`` even (at least 8).
     l1_tol : float
         The L1 error of p(H | t) above which ``check`` warns.
     extrapolate : bool
