@@ -633,6 +633,7 @@ def plot_fpk(df, path, part: str):
     import textwrap
 
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -653,6 +654,8 @@ def plot_fpk(df, path, part: str):
         noise = df.attrs.get("mc_noise")
         if case != "linear" and noise and np.isfinite(noise):
             ax.axhline(noise, color="grey", ls=":", lw=1, label="Monte Carlo reference's noise")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # minor labels overlap on a short decade
+        ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("CPU time of one run [s]")
         ax.set_ylabel("L1 of p(H | t), worst phase" if part == "forced" else "L1 of p(H)")
         ax.set_title(("closed form" if case == "linear" else f"{case}, against stored Monte Carlo"), fontsize=9)
