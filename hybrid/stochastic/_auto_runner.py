@@ -23,15 +23,9 @@ from hybrid.errors import ModelError, ParameterError
 from hybrid.sizes import check_limit, check_size
 
 from . import _auto_codegen, _auto_exec, _rng
-from ._auto_exec import COUNT_NAMES
+from ._auto_exec import COUNT_NAMES, check_chunk_count, default_chunk_paths
 from ._codegen import load_source
-from ._runner import (
-    CHATTER_IMPACTS_PER_STEP,
-    MAX_PATH_STEPS,
-    ChatteringWarning,
-    check_chunk_count,
-    default_chunk_paths,
-)
+from ._problem import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, StepSizeWarning
 from ._statistics import Estimate, ratio_estimate
 
 
@@ -512,7 +506,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Statistics every ``stride`` steps.
     chunk_paths : int, optional
         Paths per chunk. The same seed and chunk size give the same numbers on any number of threads. Default:
-        chosen from the paths and the steps by :func:`~hybrid.stochastic._runner.default_chunk_paths` (8 for few
+        chosen from the paths and the steps by :func:`~hybrid.stochastic.default_chunk_paths` (8 for few
         long paths, larger for many short ones) and recorded as ``settings["chunk_paths"]``.
     threads : int, optional
         Worker threads (default: the CPU count).
@@ -728,26 +722,17 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     elif ckdir is not None and resume:
         loaded = _auto_exec.load(ckdir, run_id, rows)
         done = loaded if loaded is not None else done
-    since = 0
 
     def accept(k, out):
-        nonlocal since
         for key, arr in out.items():
             rows[key][k] = arr
         done[k] = True
-        since += 1
-        if ckdir is not None and since >= checkpoint_every:
-            _auto_exec.write(ckdir, run_id, done, rows)
-            since = 0
 
-    pending = [k for k in range(n_chunks) if not done[k]] if device is None else []
-    try:
-        if pending:
-            _auto_exec.execute(job, pending, states, accept, threads=threads or os.cpu_count() or 1,
-                               scheduler=scheduler)
-    finally:
-        if ckdir is not None and since:  # keep every finished chunk, also on an interrupt
-            _auto_exec.write(ckdir, run_id, done, rows)
+    if device is None:
+        _auto_exec.run_chunks(job, [k for k in range(n_chunks) if not done[k]], states, accept,
+                              threads=threads or os.cpu_count() or 1, scheduler=scheduler, module=module,
+                              save=(lambda: _auto_exec.write(ckdir, run_id, done, rows)) if ckdir is not None else None,
+                              checkpoint_every=checkpoint_every)
     hist, vhist, counts, sums, events = rows["hist"], rows["vhist"], rows["counts"], rows["sums"], rows["events"]
     jhist = rows["jhist"] if joint is not None else None
     phist, psums, pcount = rows["phist"], rows["psums"], rows["pcount"]
@@ -831,8 +816,6 @@ def guard_step_rule(gstat: np.ndarray, names, dt: float, *, refuse: bool, warn: 
     0.0002
     """
     from hybrid.errors import StepSizeError
-
-    from ._runner import StepSizeWarning
 
     out, worst, worst_ratio = {}, None, 0.0
     for j, name in enumerate(names):

@@ -12,7 +12,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from hybrid.errors import VibroWarning
 from hybrid.sizes import MAX_MEMORY, MAX_PATH_STEPS  # the shared size estimator's default limits
+
+
+class StepSizeWarning(VibroWarning):
+    """The step is legal but coarse: the result carries a visible discretisation bias."""
+
+
+class ChatteringWarning(VibroWarning):
+    """Impacts happen on a sizeable share of the steps: the paths chatter against a wall at the step scale."""
+
+
+CHATTER_IMPACTS_PER_STEP = 0.05
+"""Above this many impacts per sampled path-step against inelastic walls, the impacts are not resolved by the step."""
 
 
 @dataclass(frozen=True)

@@ -216,9 +216,8 @@ def run(args, resolved, plan) -> int:
     import numpy as np
     import pandas as pd
 
-    from hybrid.stochastic import atomic_write_text, simulate_automaton
+    from hybrid.stochastic import atomic_write_text, default_chunk_paths, simulate_automaton
     from hybrid.stochastic._auto_codegen import analyse
-    from hybrid.stochastic._runner import default_chunk_paths
     from models.automata import describe_automaton
     from vibro.provenance import noise_assumption, record, write_sidecar
 
