@@ -26,7 +26,7 @@ from . import _auto_codegen, _auto_exec, _rng
 from ._auto_exec import COUNT_NAMES, check_chunk_count, default_chunk_paths
 from ._codegen import load_source
 from ._problem import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, StepSizeWarning
-from ._statistics import Estimate, ratio_estimate
+from ._statistics import Estimate, joint_frame, ratio_estimate
 
 
 @dataclass(frozen=True)
@@ -339,6 +339,14 @@ class AutomatonEnsemble:
         hi = np.concatenate([[e[0]], e[1:], [np.inf]])
         dens = np.concatenate([[np.nan], d, [np.nan]])
         return pd.DataFrame({"lo": lo, "hi": hi, "count": c, "density": dens})
+
+    def joint_to_pandas(self):
+        """The joint histogram in long form, as :meth:`EnsembleStatistics.joint_to_pandas` writes it: x_lo, x_hi,
+        y_lo, y_hi, count, density (normalised by all samples), and a last row counting the samples outside it."""
+        if self.joint is None:
+            raise ParameterError("no joint histogram was collected: pass joint=(name_x, name_y, ...)")
+        _, _, xe, ye, counts = self.joint
+        return joint_frame(xe, ye, counts, self.flags["joint_outside"], self.flags["samples"])
 
     def __repr__(self) -> str:
         means = ", ".join(f"E[{nm}]={self.mean(nm)}" for nm in self.names[:3])
