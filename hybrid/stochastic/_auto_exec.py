@@ -19,11 +19,13 @@ another run is refused naming the settings that differ.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +33,7 @@ import numpy as np
 from hybrid.errors import CheckpointError, ParameterError
 from hybrid.io import atomic_write
 
-from . import _codegen, _rng, _shared_exec
+from . import _codegen, _rng
 
 CHECKPOINT_FILE = "automaton_checkpoint.npz"
 """The checkpoint of an automaton ensemble (per-chunk rows) or of a CUDA run (per-path state)."""
@@ -74,6 +76,18 @@ def default_chunk_paths(paths: int, steps: float | None = None) -> int:
     return max(chunk, -(-paths // MAX_CHUNKS))
 
 
+def chunk_sizes(paths: int, chunk_paths: int) -> np.ndarray:
+    """Paths of each chunk: ``chunk_paths`` each, the last one the rest.
+
+    Examples
+    --------
+    >>> chunk_sizes(10, 4).tolist()
+    [4, 4, 2]
+    """
+    n_chunks = -(-paths // chunk_paths)
+    return np.minimum(chunk_paths, paths - np.arange(n_chunks, dtype=np.int64) * chunk_paths).astype(np.int64)
+
+
 def check_chunk_count(paths: int, chunk_paths: int) -> int:
     """The number of chunks; refuse more than :data:`MAX_CHUNKS` (each chunk spawns its own random stream).
 
@@ -98,6 +112,71 @@ PER_CHUNK = ("hist", "jhist", "vhist", "counts", "sums", "events", "gstat", "phi
 
 COUNT_NAMES = ("samples", "event_overflow", "outside", "nonfinite", "joint_outside", "bad_reset")
 """Names of the per-chunk counters, in the kernel's order."""
+
+
+def checksum(arrays: dict) -> str:
+    """SHA-256 over every array's name, dtype, shape and bytes (an edited file with doubled counts is refused)."""
+    h = hashlib.sha256()
+    for key in sorted(arrays):
+        a = np.ascontiguousarray(arrays[key])
+        h.update(f"{key}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def prepare_directory(directory: Path) -> None:
+    """Before any work: the checkpoint path must be a directory that can be created and written."""
+    if directory.exists() and not directory.is_dir():
+        raise CheckpointError(f"checkpoint {str(directory)!r} is a file, not a directory; give a directory")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CheckpointError(f"cannot create the checkpoint directory {str(directory)!r} ({exc.strerror or exc})") \
+            from None
+
+
+def read_checked(path: Path, fmt: int, hint: str) -> dict:
+    """The arrays of the checkpoint ``path`` (``checksum`` removed) after its format and checksum are verified."""
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            arrays = {k: d[k] for k in d.files}
+    except Exception as exc:  # not a zip, truncated, bad member: numpy raises many types
+        raise CheckpointError(f"checkpoint {path} cannot be read ({type(exc).__name__}): it is corrupt; {hint}") \
+            from None
+    stored = str(arrays.pop("checksum", ""))
+    if "format" not in arrays or int(arrays["format"]) != fmt:
+        raise CheckpointError(f"checkpoint {path} has an old or unknown format (need {fmt}); {hint}")
+    if stored != checksum(arrays):
+        raise CheckpointError(f"checkpoint {path} fails its checksum (edited or corrupt); {hint}")
+    return arrays
+
+
+@contextmanager
+def dask_client(scheduler):
+    """A ``distributed.Client`` for ``scheduler`` ("dask": a LocalCluster of this machine, "dask=ADDRESS", or a
+    Client, which is used as it is); what it opened is closed on exit."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:  # pragma: no cover
+        raise ParameterError("scheduler='dask' needs dask.distributed: pip install 'dask[distributed]'") from exc
+    if not isinstance(scheduler, str):
+        yield scheduler
+        return
+    name, _, address = scheduler.partition("=")
+    if name != "dask":
+        raise ParameterError(f"unknown scheduler {scheduler!r}; use threads, dask, dask=ADDRESS or a Client")
+    own = []
+    try:
+        if address:
+            own.append(Client(address))
+        else:
+            own.append(LocalCluster(n_workers=min(2, os.cpu_count() or 1), threads_per_worker=1, processes=True,
+                                    dashboard_address=None))
+            own.append(Client(own[-1]))
+        yield own[-1]
+    finally:
+        for obj in reversed(own):  # the client before its cluster
+            obj.close()
 
 
 def chunk_shapes(n_obs: int, width: int, joint_bins: tuple, n_trans: int, v_bins: int, n_phases: int,
@@ -139,6 +218,10 @@ class AutomatonJob:
         module, _ = _codegen.load_source(self.name, self.src, getattr(self, "user_law", None),
                                          label=getattr(self, "label", None))
         return module
+
+    def zero_rows(self, n_chunks: int) -> dict:
+        """Zeroed per-chunk arrays of every output for ``n_chunks`` chunks (the rows a device run fills)."""
+        return {k: np.zeros((n_chunks, *shape), dtype=dtype) for k, (shape, dtype, _) in self.shapes.items()}
 
     def empty(self) -> dict:
         out = {k: np.full(shape, fill, dtype=dtype) for k, (shape, dtype, fill) in self.shapes.items()}
@@ -209,7 +292,7 @@ def identity(settings: dict) -> str:
 
 def check_directory(directory: Path, resume: bool, name: str = CHECKPOINT_FILE) -> None:
     """Before any work: a directory that can be written, and no checkpoint to overwrite unless resuming."""
-    _shared_exec.prepare_directory(directory)
+    prepare_directory(directory)
     if not resume and (directory / name).exists():
         raise ParameterError(f"{directory / name} exists; pass resume=True (--resume) or another directory")
 
@@ -218,7 +301,7 @@ def write(directory: Path, run_id: str, done: np.ndarray, rows: dict, name: str 
     """Write the checkpoint ``directory/name`` atomically: ``rows``, the done-mask, format, identity, checksum."""
     arrays = {**rows, "done": np.asarray(done, bool), "format": np.array(CHECKPOINT_FORMAT),
               "identity": np.array(run_id)}
-    arrays["checksum"] = np.array(_shared_exec.checksum(arrays))
+    arrays["checksum"] = np.array(checksum(arrays))
     directory.mkdir(parents=True, exist_ok=True)
     # the shared writer: a unique temporary name (ends in .npz, so savez adds nothing), removed on failure
     atomic_write(directory / name, lambda tmp: np.savez(tmp, **arrays))
@@ -230,7 +313,7 @@ def read(directory: Path, run_id: str, name: str = CHECKPOINT_FILE) -> dict | No
     path = directory / name
     if not path.exists():
         return None
-    arrays = _shared_exec.read_checked(path, CHECKPOINT_FORMAT, "delete it or use another checkpoint directory")
+    arrays = read_checked(path, CHECKPOINT_FORMAT, "delete it or use another checkpoint directory")
     stored = str(arrays.pop("identity", ""))
     if stored != run_id:
         try:
@@ -284,7 +367,7 @@ def execute(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, thr
             "a Python-callable restitution law is compiled in memory and cannot be shipped to Dask workers; "
             "declare it as a sympy expression of v (CustomRestitution('...')) or use the local threads"
         )
-    with _shared_exec.dask_client(scheduler) as client:
+    with dask_client(scheduler) as client:
         from distributed import as_completed  # present: the client was made
 
         futures = [client.submit(_remote, job, k, states[k].copy(), pure=False, retries=3,

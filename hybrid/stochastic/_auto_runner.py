@@ -25,7 +25,7 @@ from hybrid.sizes import check_limit, check_size
 from . import _auto_codegen, _auto_exec, _rng
 from ._auto_exec import COUNT_NAMES, check_chunk_count, default_chunk_paths
 from ._codegen import load_source
-from ._problem import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, StepSizeWarning
+from ._problem import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, StepSizeWarning, positive_int
 from ._statistics import Estimate, joint_frame, ratio_estimate
 
 
@@ -457,12 +457,6 @@ def _as_count(name, value, meaning):
     return int(value)
 
 
-def _as_int(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ParameterError(f"{name}={value!r} must be a positive integer")
-    return int(value)
-
-
 def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, t_end: float, x0,
                        t_burn: float = 0.0, mode0: str | None = None, params: dict | None = None, seed: int,
                        observables: dict | None = None, histograms: dict | None = None, joint=None,
@@ -575,12 +569,12 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     t_burn = _as_float("t_burn", t_burn, positive=False)
     if not 0.0 <= t_burn < t_end:
         raise ParameterError(f"t_burn={t_burn!r} must lie in [0, t_end={t_end!r}) so that something is sampled")
-    paths = _as_int("paths", paths)
-    stride = _as_int("stride", stride)
+    paths = positive_int("paths", paths)
+    stride = positive_int("stride", stride)
     # one chunk holds every path when chunk_paths >= paths: same numbers, no arrays sized for absent paths
     chunk_paths = min(default_chunk_paths(paths, t_end / dt) if chunk_paths is None
-                      else _as_int("chunk_paths", chunk_paths), paths)
-    checkpoint_every = _as_int("checkpoint_every", checkpoint_every)
+                      else positive_int("chunk_paths", chunk_paths), paths)
+    checkpoint_every = positive_int("checkpoint_every", checkpoint_every)
     dt_requested, phase_steps = dt, 1
     phases = _as_count("phases", phases, "0: no phase sections")
     if phases:
@@ -685,8 +679,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
 
     n_chunks = -(-paths // chunk_paths)
     states = _rng.chunk_states(seed, n_chunks)
-    npaths = np.full(n_chunks, chunk_paths, dtype=np.int64)
-    npaths[-1] = paths - chunk_paths * (n_chunks - 1)
+    npaths = _auto_exec.chunk_sizes(paths, chunk_paths)
     n_obs = max(len(names), 1)
     width = max(bins) + 2 if bins else 3
     n_tr = len(st.transitions)
@@ -698,7 +691,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 j_bins=j_bins, v_scale=int(v_bins) / float(v_hi), v_bins=int(v_bins), phases=phases,
                 phase_steps=phase_steps)
     job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
-    rows = {k: np.zeros((n_chunks, *shape), dtype=dtype) for k, (shape, dtype, _) in shapes.items()}
+    rows = job.zero_rows(n_chunks)
     device = None
     if scheduler == "cuda":  # the same generated step code on the GPU, one thread per path
         from . import _auto_cuda

@@ -234,8 +234,8 @@ def _job(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple
     automaton, observables, src, st = _generated(model, auto_scheme)
     name, user_law = kernel_name(model, auto_scheme, src)
     s = settings
-    n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
-    npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
+    cp, paths = s["chunk_paths"], s["paths"]
+    npaths = _auto_exec.chunk_sizes(paths, cp)
     xy = s["xy_bins"]
     (xlo, _), (ylo, _) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
     nx, ny = xy if xy is not None else (1, 1)
@@ -300,8 +300,7 @@ def run_on_cuda(model, scheme: str, settings: dict, scales: dict, *, keyed: dict
         _auto_exec.check_directory(ckdir, resume)
     run_id = _auto_exec.identity({**keyed, **settings["identity"], "precision": precision,
                                   "device_source": device.name})
-    rows = {k: np.zeros((settings["n_chunks"], *shape), dtype=dtype)
-            for k, (shape, dtype, _) in chunks.job.shapes.items()}
+    rows = chunks.job.zero_rows(settings["n_chunks"])
     device_settings = device.run(rows, run_id=run_id, checkpoint=ckdir, resume=resume,
                                  checkpoint_every=checkpoint_every, launch_steps=launch_steps)
     ids = np.arange(settings["n_chunks"], dtype=np.int64)

@@ -43,6 +43,7 @@ from ._problem import (
     Execution,
     MonteCarloAlgorithm,
     StepSizeWarning,
+    positive_int,
 )
 from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
@@ -160,16 +161,6 @@ def check_step(model, dt: float, h_max: float = 4.0, scheme=None) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------------- set-up
-def _positive_int(name, value):
-    try:
-        iv = int(value)
-    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: inf
-        raise ParameterError(f"{name}={value!r} must be a positive integer") from exc
-    if iv != value or iv <= 0:
-        raise ParameterError(f"{name}={value!r} must be a positive integer")
-    return iv
-
-
 def _as_x0(x0) -> tuple[float, float]:
     """``x0`` as a pair of floats, or a one-line :class:`ParameterError` (a scalar, a string, complex values)."""
     try:
@@ -261,17 +252,17 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
         raise ParameterError(f"t_burn={t_burn!r} must be a finite number >= 0")
     if t_burn >= t_end:
         raise ParameterError(f"t_burn={t_burn:g} must be smaller than t_end={t_end:g} (nothing would be sampled)")
-    paths = _positive_int("paths", paths)
-    bins = _positive_int("bins", bins)
-    stride = _positive_int("stride", stride)
-    v_bins = _positive_int("v_bins", v_bins)
+    paths = positive_int("paths", paths)
+    bins = positive_int("bins", bins)
+    stride = positive_int("stride", stride)
+    v_bins = positive_int("v_bins", v_bins)
     chunk_paths = (default_chunk_paths(paths, float(t_end) / float(dt)) if chunk_paths is None
-                   else _positive_int("chunk_paths", chunk_paths))
+                   else positive_int("chunk_paths", chunk_paths))
     chunk_paths = min(chunk_paths, paths)  # one chunk holds every path: same numbers, no arrays for absent paths
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed={seed!r} must be a non-negative integer (randomness only from explicit seeds)")
     if xy_bins is not None:
-        xy_bins = [_positive_int("xy_bins", b) for b in xy_bins]
+        xy_bins = [positive_int("xy_bins", b) for b in xy_bins]
         if len(xy_bins) != 2:
             raise ParameterError(f"xy_bins={xy_bins!r} must be two positive integers (nx, ny)")
     _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_memory)
@@ -563,7 +554,7 @@ def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execu
                              "double only)")
     if ex.resume and ex.checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
-    _positive_int("checkpoint_every", ex.checkpoint_every)
+    positive_int("checkpoint_every", ex.checkpoint_every)
     settings["kernel"] = _choose_kernel(model, sch, algorithm.kernel, gpu)
     return sch, settings
 
@@ -748,8 +739,8 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     (2, 11)
     """
     sch = get_scheme(scheme)
-    paths = _positive_int("paths", paths)
-    every = _positive_int("every", every)
+    paths = positive_int("paths", paths)
+    every = positive_int("every", every)
     if not (math.isfinite(dt) and dt > 0 and math.isfinite(t_end) and t_end > 0):
         raise ParameterError(f"dt={dt!r} and t_end={t_end!r} must be finite and positive")
     nstep = int(round(t_end / dt))
@@ -762,7 +753,7 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     _check_noise(model)
     _front.check_model(model, sch)
     chunk = (default_chunk_paths(paths, float(t_end) / float(dt)) if chunk_paths is None
-             else _positive_int("chunk_paths", chunk_paths))
+             else positive_int("chunk_paths", chunk_paths))
     chunk = min(chunk, paths)  # as simulate_ensemble chooses it: the same chunks, the same streams
     states = _rng.chunk_states(seed, check_chunk_count(paths, chunk))
     if check_dt:
