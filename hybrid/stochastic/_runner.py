@@ -382,6 +382,17 @@ def _bad_restitution(model, cnt, sm, ids) -> None:
                       sm[row, SUMS.index("bad_e_value")], f"of chunk {int(ids[row])}")
 
 
+def _in_kernel(model, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``; an exception raised inside the compiled kernel (a callable law, a math domain
+    error) becomes one line (:func:`_run_error`), the framework's own errors pass as they are."""
+    try:
+        return fn(*args, **kwargs)
+    except VibroError:
+        raise
+    except Exception as exc:
+        raise _run_error(model, exc) from exc
+
+
 def _run_error(model, exc: Exception) -> VibroError:
     """A one-line error for an exception raised inside the compiled kernel (for example by a callable law)."""
     text = str(exc).splitlines()[0] if str(exc) else ""
@@ -638,13 +649,9 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
         _write_checkpoint(ckdir, stats)
 
     try:
-        _auto_exec.run_chunks(chunks.job, pending, states, accept, threads=nb.get_num_threads(),
-                              scheduler=ex.scheduler, module=kern.module, save=save if ckdir is not None else None,
-                              checkpoint_every=int(ex.checkpoint_every), progress=bar)
-    except VibroError:
-        raise
-    except Exception as exc:  # raised inside the kernel (a callable law, a math domain error): one line
-        raise _run_error(model, exc) from exc
+        _in_kernel(model, _auto_exec.run_chunks, chunks.job, pending, states, accept, threads=nb.get_num_threads(),
+                   scheduler=ex.scheduler, module=kern.module, save=save if ckdir is not None else None,
+                   checkpoint_every=int(ex.checkpoint_every), progress=bar)
     finally:
         if bar is not None:
             bar.close()
@@ -711,13 +718,8 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     dws = np.ascontiguousarray((math.sqrt(float(dt)) * z)[:, :, None])
     out = np.empty((n, 2))
     bad = np.zeros(3)
-    try:
-        module.drive(np.array(x0, dtype=float), 0, dws, float(dt), 0.0, prm, out, np.empty((n, 0, 3)),
-                     np.zeros(n, dtype=np.int64), bad)
-    except VibroError:
-        raise
-    except Exception as exc:
-        raise _run_error(model, exc) from exc
+    _in_kernel(model, module.drive, np.array(x0, dtype=float), 0, dws, float(dt), 0.0, prm, out, np.empty((n, 0, 3)),
+               np.zeros(n, dtype=np.int64), bad)
     _refuse_failed_checks(model, bad, "of the driven paths")
     return out
 
@@ -766,13 +768,8 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     for k, state in enumerate(states):
         lo = k * chunk
         part = np.zeros(3)
-        try:
-            module.record_chunk(state.copy(), min(chunk, paths - lo), (nrec - 1) * every, every, float(dt), 0.0,
-                                np.array(x0, dtype=float), 0, prm, zx, zk, zf, out[lo: lo + chunk], part)
-        except VibroError:
-            raise
-        except Exception as exc:
-            raise _run_error(model, exc) from exc
+        _in_kernel(model, module.record_chunk, state.copy(), min(chunk, paths - lo), (nrec - 1) * every, every,
+                   float(dt), 0.0, np.array(x0, dtype=float), 0, prm, zx, zk, zf, out[lo: lo + chunk], part)
         if part[0] and not bad[0]:
             bad[1] = part[1]
         bad[0] += part[0]
