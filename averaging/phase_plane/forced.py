@@ -52,8 +52,8 @@ alone at 2K steps and the combination) is still reported.
 
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): on example 08 (D = 0.02) the L1 of p(H | t)
 against converged Monte Carlo (noise 0.0022) is 0.0028 mean and 0.0045 worst over 16 phases at the default grid
-(64, 128) with 64 + 128 steps (estimate 0.0045), in 35 s CPU and 2.2 GB (44 s and 2.5 GB before the
-nested-dissection factors and the looser GMRES tolerance); the linear oscillator's section means
+(64, 128) with 64 + 128 steps (estimate 0.0045), in 32-36 s CPU and 2.2 GB (44-48 s and 2.5 GB before
+the nested-dissection factors and the looser GMRES tolerance); the linear oscillator's section means
 and variances are within 2.3e-6 and 3.5e-5 of the closed form at 64 + 128 steps.
 
 Outputs (:class:`PeriodicDensity`): the density at any time of the period (``section(t)``, a
@@ -915,10 +915,9 @@ class _PermutedLU:
 
     def __init__(self, lu, order):
         self._lu, self._order = lu, order
-        self._out = np.empty(len(order))
 
     def solve(self, b):
-        x = np.empty_like(self._out)
+        x = np.empty(len(self._order))
         x[self._order] = self._lu.solve(b[self._order])
         return x
 
