@@ -23,6 +23,8 @@ Monte Carlo survival itself over its last decade (that term is printed; it is un
     python benchmarks/first_passage_reference.py run H_c DT PATHS SEED [--uncorrected]   # one run, appended
     python benchmarks/first_passage_reference.py plan                                     # the runs of the file
     python benchmarks/first_passage_reference.py reference                                # combine -> json, table
+    python benchmarks/first_passage_reference.py near H0 DT PATHS SEED [--uncorrected]     # R(t) from H0 < 2
+    python benchmarks/first_passage_reference.py survival        # fpk R(t) against the Kaplan-Meier curves -> json
 
 Each run appends one JSON line to ``benchmarks/data/first_passage_mc_runs.jsonl`` (paths, dt, seed, t_max, the
 mean with its 95 % CI, censored paths, the tail term, R(t) at 200 times with Wilson intervals, CPU and wall s).
@@ -46,6 +48,8 @@ from models import DuffingImpact, Ma
 DATA = Path(__file__).resolve().parent / "data"
 RUNS = DATA / "first_passage_mc_runs.jsonl"
 REFERENCE = DATA / "first_passage_reference.json"
+SURVIVAL = DATA / "first_passage_survival.json"
+NEAR = DATA / "first_passage_mc_near_level.jsonl"
 BETA = 0.5826  # -zeta(1/2)/sqrt(2 pi)
 LEVELS = (0.25, 0.5, 1.0, 1.5, 2.0)
 T_MAX = {0.25: 60.0, 0.5: 120.0, 1.0: 300.0, 1.5: 450.0, 2.0: 800.0}  # R(t_max) below 1e-3 (fpk's decay rates)
@@ -103,6 +107,23 @@ def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000):
             "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - t0}
 
 
+def near_level(H0, dt, paths, seed, corrected=True, H_c=2.0, t_max=5.0, snapshots=100):
+    """The correction's check at hard impacts: R(t) on [0, t_max] from (0, sqrt(2 H0)), just below the level,
+    where most paths leave within a fraction of a period and the level's placement decides R directly."""
+    model = example1()
+    kb = BETA * math.sqrt(2 * 0.05 * dt) if corrected else 0.0
+    c0 = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the paths still inside at t_max are the point of the check
+        r = simulate_first_passage(model, "H + kb*abs(y) < hc", "splitting", dt=dt, paths=paths, t_max=t_max,
+                                   x0=(0.0, math.sqrt(2 * H0)), seed=seed, snapshots=snapshots,
+                                   time_bins=10 * snapshots, params={"hc": H_c, "kb": kb}, chunk_paths=1000)
+    lo, hi = r.survival_interval()
+    return {"H_c": H_c, "H0": H0, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb,
+            "t_max": t_max, "times": r.times.tolist(), "R": r.survival.tolist(), "R_lo": lo.tolist(),
+            "R_hi": hi.tolist(), "cpu_seconds": time.process_time() - c0}
+
+
 def load_runs():
     return [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()] if RUNS.exists() else []
 
@@ -121,7 +142,7 @@ def combine(runs):
 def reference():
     """Per level: the corrected runs per step and each step's difference from the finest with its CI; the
     reference is their inverse-variance pool where every difference lies within its CI, else the finest step
-    alone. R(t) at H_c = 0.25 (all its corrected runs) with its Wilson interval. Writes REFERENCE."""
+    alone. R(t) of the same runs pooled, with its Wilson interval. Writes REFERENCE."""
     from hybrid.stochastic._passage import _wilson
 
     runs = [r for r in load_runs() if r["corrected"]]
@@ -153,19 +174,48 @@ def reference():
                "step_differences": differences,
                "steps": {str(dt): {k: v for k, v in c.items() if k not in ("R", "times")}
                          for dt, c in per_dt.items()}}
-        if H_c == 0.25:  # R(t): every corrected run pooled (their steps agree)
-            n = sum(c["paths"] for c in per_dt.values())
-            R = sum(c["paths"] * c["R"] for c in per_dt.values()) / n
-            lo, hi = _wilson(np.round(R * n), n)
-            row["survival"] = {"t": per_dt[steps[0]]["times"].tolist(), "R": R.tolist(), "R_lo": lo.tolist(),
-                               "R_hi": hi.tolist(), "paths": n}
+        # R(t): the runs of the reference's steps pooled (Kaplan-Meier = empirical survival: censoring at t_max only)
+        used = [per_dt[dt] for dt in (steps if pooled else steps[-1:])]
+        n = sum(c["paths"] for c in used)
+        R = sum(c["paths"] * c["R"] for c in used) / n
+        lo, hi = _wilson(np.round(R * n), n)
+        row["survival"] = {"t": used[0]["times"].tolist(), "R": R.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
+                           "paths": n, "max_half_width": float(np.max(hi - lo) / 2)}
         out["levels"][str(H_c)] = row
         print(json.dumps({"H_c": H_c, **{k: v for k, v in row.items() if k != "survival"}}), flush=True)
     REFERENCE.write_text(json.dumps(out, indent=1) + "\n")
 
 
+def survival(grids=((60, 64), (120, 128)), steps=2000):
+    """fpk's R(t) against the stored Kaplan-Meier curves at every level: sup |R_fpk - R_mc|, where, the largest
+    excess over the Monte Carlo's 95 % half-width, that half-width, and fpk's CPU seconds. Writes SURVIVAL."""
+    from averaging.phase_plane import first_passage_fpk
+
+    model = DuffingImpact(restitution=Ma(vc=0.4))
+    levels = json.loads(REFERENCE.read_text())["levels"]
+    out = {"script": "benchmarks/first_passage_reference.py survival", "steps": steps, "levels": {}}
+    for H_c in LEVELS:
+        sv = levels[str(H_c)]["survival"]
+        t, R, lo, hi = (np.array(sv[k]) for k in ("t", "R", "R_lo", "R_hi"))
+        half = (hi - lo) / 2
+        row = {"paths": sv["paths"], "mc_max_half_width": float(half.max()), "grids": {}}
+        for grid in grids:
+            c0 = time.process_time()
+            r = first_passage_fpk(model, f"H < {H_c}", grid=grid, check=False, t_max=float(t[-1]), steps=steps)
+            cpu = time.process_time() - c0
+            gap = np.abs(r.survival(t) - R)
+            k = int(np.argmax(gap))
+            row["grids"][f"{grid[0]}x{grid[1]}"] = {
+                "sup_gap": float(gap[k]), "at_t": float(t[k]), "R_there": float(R[k]),
+                "half_width_there": float(half[k]), "max_excess_over_half_width": float(np.max(gap - half)),
+                "cpu_seconds": cpu}
+        out["levels"][str(H_c)] = row
+        print(json.dumps({str(H_c): row}), flush=True)
+    SURVIVAL.write_text(json.dumps(out, indent=1) + "\n")
+
+
 def main(argv):
-    if not argv or argv[0] not in ("run", "plan", "reference", "validate"):
+    if not argv or argv[0] not in ("run", "plan", "reference", "validate", "survival", "near"):
         print(__doc__)
         return 2
     if argv[0] == "plan":
@@ -177,11 +227,21 @@ def main(argv):
     if argv[0] == "reference":
         reference()
         return 0
+    if argv[0] == "survival":
+        survival()
+        return 0
     if argv[0] == "validate":
         rows = [r for r in load_runs() if r["H_c"] == 0.25]
         for r in sorted(rows, key=lambda r: (r["corrected"], -r["dt"])):
             print(f"corrected={r['corrected']!s:5} dt={r['dt']:<8g} paths={r['paths']:>7} "
                   f"mean={r['mean']:.4f} +- {r['ci95']:.4f}")
+        return 0
+    if argv[0] == "near":
+        out = near_level(float(argv[1]), float(argv[2]), int(argv[3]), int(argv[4]), "--uncorrected" not in argv)
+        with open(NEAR, "a") as fh:
+            fh.write(json.dumps(out) + "\n")
+        print(json.dumps({k: out[k] for k in ("H0", "dt", "paths", "seed", "corrected", "cpu_seconds")}),
+              "R at t = 1, 5:", out["R"][19], out["R"][-1], flush=True)
         return 0
     H_c, dt, paths, seed = float(argv[1]), float(argv[2]), int(argv[3]), int(argv[4])
     out = run(H_c, dt, paths, seed, corrected="--uncorrected" not in argv)
