@@ -20,7 +20,7 @@ its CI): where a difference exceeds its CI (H_c = 1.5), the finest step alone is
 Paths still inside at t_max are counted; the mean adds their tail R(t_max) / lambda, lambda the log-slope of the
 Monte Carlo survival itself over its last decade (that term is printed; it is under 0.1 % of the mean).
 
-    python benchmarks/first_passage_reference.py run H_c DT PATHS SEED [--uncorrected]   # one run, appended
+    python benchmarks/first_passage_reference.py run H_c DT PATHS SEED [--uncorrected] [--scheme S]  # one run
     python benchmarks/first_passage_reference.py plan                                     # the runs of the file
     python benchmarks/first_passage_reference.py reference                                # combine -> json, table
     python benchmarks/first_passage_reference.py near H0 DT PATHS SEED [--uncorrected]     # R(t) from H0 < 2
@@ -86,7 +86,7 @@ def tail_term(times, survival, paths):
     return float(r_end / rate), float(rate)
 
 
-def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000):
+def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000, scheme="splitting"):
     """One ensemble: the mean first-passage time (with the tail term) and R(t) at SNAPSHOTS times."""
     model = example1()
     kb = BETA * math.sqrt(2 * 0.05 * dt) if corrected else 0.0
@@ -94,14 +94,14 @@ def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000):
     t0, c0 = time.perf_counter(), time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # censoring is counted below and its tail added
-        r = simulate_first_passage(model, "H + kb*abs(y) < hc", "splitting", dt=dt, paths=paths, t_max=t_max,
+        r = simulate_first_passage(model, "H + kb*abs(y) < hc", scheme, dt=dt, paths=paths, t_max=t_max,
                                    x0=(0.0, 0.0), seed=seed, snapshots=SNAPSHOTS, time_bins=40_000,
                                    params={"hc": H_c, "kb": kb}, chunk_paths=chunk_paths)
         est = r.mean_time()
     tail, rate = tail_term(r.times, r.survival, r.paths)
     lo, hi = r.survival_interval()
     return {"H_c": H_c, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb, "t_max": t_max,
-            "scheme": "splitting", "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
+            "scheme": scheme, "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
             "tail": tail, "tail_rate": rate, "censored": r.censored, "times": r.times.tolist(),
             "R": r.survival.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
             "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - t0}
@@ -128,11 +128,29 @@ def load_runs():
     return [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()] if RUNS.exists() else []
 
 
-def combine(runs):
-    """Pool runs of one (level, dt) (paths-weighted; CIs in quadrature as independent means)."""
+def scatter_factor(runs):
+    """sqrt(chi2 / dof) of the replicate runs (same level and step) about their pooled mean, at least 1.
+
+    Replicates that scatter more than their CIs say would widen every CI of the reference by this factor (the
+    Birge ratio); measured: chi2 6.6 on 7 degrees of freedom, factor 1."""
+    chi2, dof = 0.0, 0
+    for key in {(r["H_c"], r["dt"]) for r in runs}:
+        group = [r for r in runs if (r["H_c"], r["dt"]) == key]
+        if len(group) < 2:
+            continue
+        w = np.array([1 / r["ci95"] ** 2 for r in group])
+        m = np.array([r["mean"] for r in group])
+        chi2 += float(np.sum(w * (m - np.sum(w * m) / np.sum(w)) ** 2))
+        dof += len(group) - 1
+    return max(1.0, math.sqrt(chi2 / dof)) if dof else 1.0, chi2, dof
+
+
+def combine(runs, scatter=(1.0, 0.0, 0)):
+    """Pool runs of one (level, dt) (paths-weighted; CIs in quadrature as independent means, widened by the
+    replicates' scatter factor)."""
     n = sum(r["paths"] for r in runs)
     mean = sum(r["paths"] * r["mean"] for r in runs) / n
-    ci = math.sqrt(sum((r["paths"] / n * r["ci95"]) ** 2 for r in runs))
+    ci = scatter[0] * math.sqrt(sum((r["paths"] / n * r["ci95"]) ** 2 for r in runs))
     R = sum(r["paths"] * np.array(r["R"]) for r in runs) / n
     return {"mean": mean, "ci95": ci, "paths": n, "seeds": [r["seed"] for r in runs],
             "censored": sum(r["censored"] for r in runs), "tail": sum(r["paths"] * r["tail"] for r in runs) / n,
@@ -145,16 +163,21 @@ def reference():
     alone. R(t) of the same runs pooled, with its Wilson interval. Writes REFERENCE."""
     from hybrid.stochastic._passage import _wilson
 
-    runs = [r for r in load_runs() if r["corrected"]]
+    runs = [r for r in load_runs() if r["corrected"] and r.get("scheme", "splitting") == "splitting"]
+    scatter = scatter_factor(runs)
     out = {"model": "Example 1: DuffingImpact a=1 b=0.2 c=0.025 D=0.05 walls +-1, Ma(vc=0.4); start (0, 0)",
            "quantity": "mean first time with H >= H_c",
            "method": "simulate_first_passage, scheme splitting, level moved to H + 0.5826 sqrt(2 D dt)|y| < H_c "
                      "(continuity correction), tail beyond t_max added as R(t_max)/lambda",
-           "script": "benchmarks/first_passage_reference.py", "levels": {}}
+           "script": "benchmarks/first_passage_reference.py",
+           "scatter_factor": {"factor": scatter[0], "chi2": scatter[1], "dof": scatter[2],
+                              "note": "replicate runs (same level and step) scatter this much more than their "
+                                      "CIs; every CI here is widened by it"},
+           "levels": {}}
     for H_c in LEVELS:
         per_dt = {}
         for dt in sorted({r["dt"] for r in runs if r["H_c"] == H_c}, reverse=True):
-            per_dt[dt] = combine([r for r in runs if r["H_c"] == H_c and r["dt"] == dt])
+            per_dt[dt] = combine([r for r in runs if r["H_c"] == H_c and r["dt"] == dt], scatter)
         if not per_dt:
             continue
         steps = sorted(per_dt, reverse=True)
@@ -244,7 +267,8 @@ def main(argv):
               "R at t = 1, 5:", out["R"][19], out["R"][-1], flush=True)
         return 0
     H_c, dt, paths, seed = float(argv[1]), float(argv[2]), int(argv[3]), int(argv[4])
-    out = run(H_c, dt, paths, seed, corrected="--uncorrected" not in argv)
+    scheme = argv[argv.index("--scheme") + 1] if "--scheme" in argv else "splitting"
+    out = run(H_c, dt, paths, seed, corrected="--uncorrected" not in argv, scheme=scheme)
     with open(RUNS, "a") as fh:
         fh.write(json.dumps(out) + "\n")
     print(json.dumps({k: v for k, v in out.items() if k not in ("times", "R", "R_lo", "R_hi")}), flush=True)
