@@ -124,8 +124,8 @@ def run(args) -> int:
                "decay_rate": r.decay_rate if math.isfinite(r.decay_rate) else None}
     if "ci" in r.details:
         results["ci"] = r.details["ci"]
-    for key in ("out_crossing_rate", "stationary_impact_rate", "censored", "mean_time_coarse", "probability",
-                "speedup"):
+    for key in ("out_crossing_rate", "stationary_impact_rate", "censored", "mean_time_coarse_rings",
+                "mean_time_coarse_angles", "probability", "speedup"):
         if key in r.details:
             results[key] = r.details[key]
     settings = {"method": method, "domain": args.domain, "start": start if isinstance(start, str) else list(start),
