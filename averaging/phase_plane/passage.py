@@ -210,7 +210,8 @@ class FirstPassage:
     mean_time : float
         E[T].
     error_estimate : float or None
-        Estimated discretisation error of ``mean_time`` (from a grid twice coarser), or the 95 % half-width (mc).
+        Estimated discretisation error of ``mean_time`` (from half the rings and half the angles), or the 95 %
+        half-width (mc).
     t, R, density : ndarray
         Times, survival P(T > t) and first-passage density -dR/dt.
     decay_rate : float
@@ -430,7 +431,7 @@ def _fpk_once(model, domain, start, grid, h_max, walls, restitution, times, want
 
 
 def _estimate_orders(order, domain):
-    """(rings, angles) convergence orders of the mean time for the two-grid estimate.
+    """(rings, angles) convergence orders of the mean time for the error estimate.
 
     Measured on Example 1 from rest (H_c = 0.25 ... 2): first order in the rings (the impact map at hard impacts;
     clean from 120 to 1920 rings at H_c = 2), about 2.6 in the angles where the level is a ring (energy domains);
