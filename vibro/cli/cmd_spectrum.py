@@ -46,8 +46,8 @@ def register(subparsers) -> None:
                    help="more frequencies over five half-power widths either side of the peak")
     p.add_argument("--grid", type=int, nargs=2, default=SPECTRUM_GRID, metavar=("NH", "NPHI"),
                    help="rings and angle cells per ring; one sparse LU per frequency, ~0.3 s of CPU at 80 x 96 (about "
-                        "75 s for the default frequencies), ~0.05 s at 40 x 48; L1 error ~0.015 at 80 x 96 on the "
-                        "linear oscillator, first order")
+                        "75 s for the default frequencies), ~0.05 s at 40 x 48; L1 error at 80 x 96: 0.003 on the free "
+                        "and 0.0007 on the folded linear oscillator, 0.0035 against Monte Carlo on Example 1")
     p.add_argument("--h-max", type=float, default=4.0, dest="h_max", help="top energy of the grid (in the tail)")
     p.add_argument("--out", required=True, metavar="FILE.csv", help="CSV omega,S (atomically; required)")
     p.add_argument("--summary-json", default=None, help="also write the summary as JSON (not written if absent)")
