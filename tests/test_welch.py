@@ -85,3 +85,16 @@ def test_welch_on_dask_gives_the_thread_numbers():
     remote = welch_spectrum(m, "x", scheduler="dask", **SMALL)
     assert np.array_equal(local.S, remote.S) and np.array_equal(local.ci, remote.ci)
     assert local.variance == remote.variance
+
+
+def test_cli_spectrum_by_monte_carlo_writes_the_interval(tmp_path):
+    from vibro.cli import main
+
+    out = tmp_path / "S.csv"
+    assert main(["spectrum", "--method", "mc", "--paths", "16", "--t-end", "120", "--t-burn", "20", "--every", "10",
+                 "--segment", "64", "--out", str(out)]) == 0
+    rows = out.read_text().splitlines()
+    assert rows[0] == "omega,S,S_lo,S_hi" and len(rows) == 1 + 33
+    assert main(["spectrum", "--method", "mc", "--paths", "16", "--t-end", "10", "--t-burn", "5",
+                 "--out", str(tmp_path / "T.csv")]) == 2  # shorter than one segment
+    assert not (tmp_path / "T.csv").exists()

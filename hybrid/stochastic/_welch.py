@@ -107,6 +107,15 @@ def welch_chunk_sums(model, observable: str, scheme: str, dt: float, t_end: floa
     DFT of the windowed raw segment; ``segments``, ``samples``, ``sum``, ``sum_sq`` count the segments and sum the
     recorded values and their squares. Centring on the grand mean m after the merge is exact:
     abs(X - m W)**2 = abs(X)**2 - 2 m Re(X conj(W)) + m**2 abs(W)**2, W the window's DFT.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> m = ImpactOscillator("x", "c*y", parameters={"c": 0.2, "D": 0.05}, barriers=None)
+    >>> part = welch_chunk_sums(m, "x", "splitting", 0.01, 120.0, 20.0, 4, 10, 64, 7,
+    ...                         (0.0, 0.0))                                   # doctest: +SKIP
+    >>> part["power"].shape, part["samples"]                                 # doctest: +SKIP
+    ((33,), 4004)
     """
     from ._runner import sample_paths
 
