@@ -98,3 +98,4 @@ def test_cli_spectrum_by_monte_carlo_writes_the_interval(tmp_path):
     assert main(["spectrum", "--method", "mc", "--paths", "16", "--t-end", "10", "--t-burn", "5",
                  "--out", str(tmp_path / "T.csv")]) == 2  # shorter than one segment
     assert not (tmp_path / "T.csv").exists()
+    assert main(["spectrum", "--method", "mc", "--scheduler", "cuda", "--out", str(tmp_path / "T.csv")]) == 2

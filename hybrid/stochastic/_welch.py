@@ -234,6 +234,10 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
     chunks = -(-paths // chunk_paths)
     if chunks < 2:
         raise ParameterError(f"paths={paths} in chunks of {chunk_paths} gives one chunk: the interval needs several")
+    if isinstance(scheduler, str) and not (scheduler in ("threads", "local")
+                                           or scheduler.partition("=")[0] == "dask"):
+        raise ParameterError(f"scheduler={scheduler!r}; the Monte Carlo spectrum runs on threads, dask, dask=ADDRESS "
+                             "or a distributed.Client (not yet on the GPU)")
     _observable_function(model, observable)  # refuse a bad observable before any path is run
     seeds = np.random.SeedSequence(seed).spawn(chunks)
     tasks = [(model, observable, scheme, dt, t_end, t_burn, min(chunk_paths, paths - k * chunk_paths), every,

@@ -59,6 +59,8 @@ def register(subparsers) -> None:
     p.add_argument("--segment", type=int, default=512,
                    help="mc: samples per Welch segment (resolution 2 pi/(segment every dt))")
     p.add_argument("--seed", type=int, default=1, help="mc: root seed")
+    p.add_argument("--scheduler", default=None, metavar="threads|dask[=ADDRESS]",
+                   help="mc: where the chunks run (the same numbers on any)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="accepted for symmetry with the other commands (nothing to show)")
     p.set_defaults(func=run)
@@ -85,7 +87,7 @@ def run(args) -> int:
     method = "fpk" if args.method == "auto" else args.method
     if method == "mc":
         options = {"dt": args.dt, "t_end": args.t_end, "t_burn": args.t_burn, "paths": args.paths,
-                   "every": args.every, "segment": args.segment, "seed": args.seed}
+                   "every": args.every, "segment": args.segment, "seed": args.seed, "scheduler": args.scheduler}
     else:
         options = {"omega_max": args.omega_max, "points": args.points, "refine": args.refine,
                    "grid": tuple(args.grid), "h_max": args.h_max}
