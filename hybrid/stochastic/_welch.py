@@ -169,8 +169,9 @@ def _run_chunks(tasks, scheduler, workers) -> list[dict]:
             return [welch_chunk_sums(*task) for task in tasks]
         from concurrent.futures import ThreadPoolExecutor
 
+        first = welch_chunk_sums(*tasks[0])  # alone: the kernel is compiled or loaded once, not by every thread
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            return list(pool.map(lambda task: welch_chunk_sums(*task), tasks))
+            return [first, *pool.map(lambda task: welch_chunk_sums(*task), tasks[1:])]
     from ._shared_exec import dask_client
 
     with dask_client(scheduler) as client:
