@@ -172,7 +172,7 @@ def _run_chunks(tasks, scheduler, workers) -> list[dict]:
         first = welch_chunk_sums(*tasks[0])  # alone: the kernel is compiled or loaded once, not by every thread
         with ThreadPoolExecutor(max_workers=workers) as pool:
             return [first, *pool.map(lambda task: welch_chunk_sums(*task), tasks[1:])]
-    from ._shared_exec import dask_client
+    from ._auto_exec import dask_client
 
     with dask_client(scheduler) as client:
         futures = [client.submit(welch_chunk_sums, *task, pure=False, retries=3) for task in tasks]
