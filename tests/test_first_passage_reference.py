@@ -76,7 +76,7 @@ def test_fpk_survival_meets_the_kaplan_meier_curve_within_0_005(reference):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="fpk's converged answer at H_c = 2 (120.27; Cartesian cells 120.45) is 1.2 % "
+@pytest.mark.xfail(strict=True, reason="fpk's converged answer at H_c = 2 (120.27; Cartesian cells 120.44) is 1.2 % "
                    "above the Monte Carlo reference (118.84 +- 0.59); the cause is not found (issue 26)")
 def test_fpk_at_its_default_grid_meets_the_reference_at_hard_impacts(reference):
     # 120 x 128 (the default), with its estimate: 120.85 +- 0.66 against 118.84 +- 0.59
