@@ -109,14 +109,13 @@ def test_a_level_domain_gives_the_poisson_estimate_from_rices_rate():
 
 
 
-def test_example_1_mean_first_passage_at_hard_impacts_is_fast_with_a_small_error_estimate():
+def test_example_1_mean_first_passage_at_hard_impacts_has_a_small_error_estimate():
     # averaging is 14-16 % short at H_c = 2, where every orbit impacts hard; fpk measured 120.85 (120x128); against
     # the Monte Carlo reference: tests/test_first_passage_reference.py
     m = DuffingImpact(restitution=Ma(vc=0.4))
     r = first_passage_fpk(m, "H < 2.0", grid=(120, 128), check=True, survival=False)
     assert r.error_estimate < 0.01 * r.mean_time  # half the rings and half the angles: 0.66 (0.55 %)
-    # CPU seconds of the solve (the goal is 2 s; measured 0.45 s on one core)
-    assert r.details["cpu_seconds"] < 2.0
+    # its CPU time (goal 2 s) is measured by benchmarks/first_passage_fpk.py, not asserted here
 
 
 def test_backward_problem_of_a_single_state():
