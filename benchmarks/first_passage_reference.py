@@ -20,9 +20,11 @@ its CI): where a difference exceeds its CI (H_c = 1.5), the finest step alone is
 Paths still inside at t_max are counted; the mean adds their tail R(t_max) / lambda, lambda the log-slope of the
 Monte Carlo survival itself over its last decade (that term is printed; it is under 0.1 % of the mean).
 
-    python benchmarks/first_passage_reference.py run H_c DT PATHS SEED [--uncorrected]   # one run, appended
+    python benchmarks/first_passage_reference.py run H_c DT PATHS SEED [--uncorrected] [--scheme S]  # one run
     python benchmarks/first_passage_reference.py plan                                     # the runs of the file
     python benchmarks/first_passage_reference.py reference                                # combine -> json, table
+    python benchmarks/first_passage_reference.py near H0 DT PATHS SEED [--uncorrected]     # R(t) from H0 < 2
+    python benchmarks/first_passage_reference.py survival        # fpk R(t) against the Kaplan-Meier curves -> json
 
 Each run appends one JSON line to ``benchmarks/data/first_passage_mc_runs.jsonl`` (paths, dt, seed, t_max, the
 mean with its 95 % CI, censored paths, the tail term, R(t) at 200 times with Wilson intervals, CPU and wall s).
@@ -46,6 +48,8 @@ from models import DuffingImpact, Ma
 DATA = Path(__file__).resolve().parent / "data"
 RUNS = DATA / "first_passage_mc_runs.jsonl"
 REFERENCE = DATA / "first_passage_reference.json"
+SURVIVAL = DATA / "first_passage_survival.json"
+NEAR = DATA / "first_passage_mc_near_level.jsonl"
 BETA = 0.5826  # -zeta(1/2)/sqrt(2 pi)
 LEVELS = (0.25, 0.5, 1.0, 1.5, 2.0)
 T_MAX = {0.25: 60.0, 0.5: 120.0, 1.0: 300.0, 1.5: 450.0, 2.0: 800.0}  # R(t_max) below 1e-3 (fpk's decay rates)
@@ -54,7 +58,11 @@ SNAPSHOTS = 200
 PLAN = [(0.25, 0.01, 100_000, 101), (0.25, 0.005, 60_000, 102), (0.5, 0.01, 24_000, 201), (0.5, 0.005, 24_000, 202),
         (1.0, 0.01, 24_000, 301), (1.0, 0.005, 24_000, 302), (1.5, 0.01, 24_000, 401), (1.5, 0.005, 24_000, 402),
         (1.5, 0.0025, 24_000, 403), (1.5, 0.0025, 24_000, 404),
-        (2.0, 0.01, 30_000, 501), (2.0, 0.005, 15_000, 502), (2.0, 0.005, 15_000, 503), (2.0, 0.0025, 15_000, 504)]
+        (2.0, 0.01, 30_000, 501), (2.0, 0.005, 15_000, 502), (2.0, 0.005, 15_000, 503), (2.0, 0.0025, 15_000, 504),
+        (2.0, 0.005, 20_000, 505), (0.5, 0.005, 110_000, 205), (2.0, 0.0025, 15_000, 509), (2.0, 0.005, 20_000, 506),
+        (1.0, 0.005, 110_000, 305)]
+# checks outside the reference: scheme baoab at H_c = 2 (run 2.0 0.005 20000 601 --scheme baoab), and R(t) from
+# H = 1.9 at three steps, corrected and not (near 1.9 DT 100000 SEED [--uncorrected], seeds 701-706)
 # the uncorrected level at H_c = 0.25 (the continuity correction's check): (dt, paths, seed)
 VALIDATE = [(0.01, 30_000, 111), (0.005, 30_000, 112), (0.0025, 30_000, 113)]
 
@@ -82,7 +90,7 @@ def tail_term(times, survival, paths):
     return float(r_end / rate), float(rate)
 
 
-def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000):
+def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000, scheme="splitting"):
     """One ensemble: the mean first-passage time (with the tail term) and R(t) at SNAPSHOTS times."""
     model = example1()
     kb = BETA * math.sqrt(2 * 0.05 * dt) if corrected else 0.0
@@ -90,28 +98,63 @@ def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000):
     t0, c0 = time.perf_counter(), time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # censoring is counted below and its tail added
-        r = simulate_first_passage(model, "H + kb*abs(y) < hc", "splitting", dt=dt, paths=paths, t_max=t_max,
+        r = simulate_first_passage(model, "H + kb*abs(y) < hc", scheme, dt=dt, paths=paths, t_max=t_max,
                                    x0=(0.0, 0.0), seed=seed, snapshots=SNAPSHOTS, time_bins=40_000,
                                    params={"hc": H_c, "kb": kb}, chunk_paths=chunk_paths)
         est = r.mean_time()
     tail, rate = tail_term(r.times, r.survival, r.paths)
     lo, hi = r.survival_interval()
     return {"H_c": H_c, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb, "t_max": t_max,
-            "scheme": "splitting", "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
+            "scheme": scheme, "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
             "tail": tail, "tail_rate": rate, "censored": r.censored, "times": r.times.tolist(),
             "R": r.survival.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
             "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - t0}
+
+
+def near_level(H0, dt, paths, seed, corrected=True, H_c=2.0, t_max=5.0, snapshots=100):
+    """The correction's check at hard impacts: R(t) on [0, t_max] from (0, sqrt(2 H0)), just below the level,
+    where most paths leave within a fraction of a period and the level's placement decides R directly."""
+    model = example1()
+    kb = BETA * math.sqrt(2 * 0.05 * dt) if corrected else 0.0
+    c0 = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the paths still inside at t_max are the point of the check
+        r = simulate_first_passage(model, "H + kb*abs(y) < hc", "splitting", dt=dt, paths=paths, t_max=t_max,
+                                   x0=(0.0, math.sqrt(2 * H0)), seed=seed, snapshots=snapshots,
+                                   time_bins=10 * snapshots, params={"hc": H_c, "kb": kb}, chunk_paths=1000)
+    lo, hi = r.survival_interval()
+    return {"H_c": H_c, "H0": H0, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb,
+            "t_max": t_max, "times": r.times.tolist(), "R": r.survival.tolist(), "R_lo": lo.tolist(),
+            "R_hi": hi.tolist(), "cpu_seconds": time.process_time() - c0}
 
 
 def load_runs():
     return [json.loads(line) for line in RUNS.read_text().splitlines() if line.strip()] if RUNS.exists() else []
 
 
-def combine(runs):
-    """Pool runs of one (level, dt) (paths-weighted; CIs in quadrature as independent means)."""
+def scatter_factor(runs):
+    """sqrt(chi2 / dof) of the replicate runs (same level and step) about their pooled mean, at least 1.
+
+    Replicates that scatter more than their CIs say would widen every CI of the reference by this factor (the
+    Birge ratio); measured: chi2 6.6 on 7 degrees of freedom, factor 1."""
+    chi2, dof = 0.0, 0
+    for key in {(r["H_c"], r["dt"]) for r in runs}:
+        group = [r for r in runs if (r["H_c"], r["dt"]) == key]
+        if len(group) < 2:
+            continue
+        w = np.array([1 / r["ci95"] ** 2 for r in group])
+        m = np.array([r["mean"] for r in group])
+        chi2 += float(np.sum(w * (m - np.sum(w * m) / np.sum(w)) ** 2))
+        dof += len(group) - 1
+    return max(1.0, math.sqrt(chi2 / dof)) if dof else 1.0, chi2, dof
+
+
+def combine(runs, scatter=(1.0, 0.0, 0)):
+    """Pool runs of one (level, dt) (paths-weighted; CIs in quadrature as independent means, widened by the
+    replicates' scatter factor)."""
     n = sum(r["paths"] for r in runs)
     mean = sum(r["paths"] * r["mean"] for r in runs) / n
-    ci = math.sqrt(sum((r["paths"] / n * r["ci95"]) ** 2 for r in runs))
+    ci = scatter[0] * math.sqrt(sum((r["paths"] / n * r["ci95"]) ** 2 for r in runs))
     R = sum(r["paths"] * np.array(r["R"]) for r in runs) / n
     return {"mean": mean, "ci95": ci, "paths": n, "seeds": [r["seed"] for r in runs],
             "censored": sum(r["censored"] for r in runs), "tail": sum(r["paths"] * r["tail"] for r in runs) / n,
@@ -121,19 +164,24 @@ def combine(runs):
 def reference():
     """Per level: the corrected runs per step and each step's difference from the finest with its CI; the
     reference is their inverse-variance pool where every difference lies within its CI, else the finest step
-    alone. R(t) at H_c = 0.25 (all its corrected runs) with its Wilson interval. Writes REFERENCE."""
+    alone. R(t) of the same runs pooled, with its Wilson interval. Writes REFERENCE."""
     from hybrid.stochastic._passage import _wilson
 
-    runs = [r for r in load_runs() if r["corrected"]]
+    runs = [r for r in load_runs() if r["corrected"] and r.get("scheme", "splitting") == "splitting"]
+    scatter = scatter_factor(runs)
     out = {"model": "Example 1: DuffingImpact a=1 b=0.2 c=0.025 D=0.05 walls +-1, Ma(vc=0.4); start (0, 0)",
            "quantity": "mean first time with H >= H_c",
            "method": "simulate_first_passage, scheme splitting, level moved to H + 0.5826 sqrt(2 D dt)|y| < H_c "
                      "(continuity correction), tail beyond t_max added as R(t_max)/lambda",
-           "script": "benchmarks/first_passage_reference.py", "levels": {}}
+           "script": "benchmarks/first_passage_reference.py",
+           "scatter_factor": {"factor": scatter[0], "chi2": scatter[1], "dof": scatter[2],
+                              "note": "replicate runs (same level and step) scatter this much more than their "
+                                      "CIs; every CI here is widened by it"},
+           "levels": {}}
     for H_c in LEVELS:
         per_dt = {}
         for dt in sorted({r["dt"] for r in runs if r["H_c"] == H_c}, reverse=True):
-            per_dt[dt] = combine([r for r in runs if r["H_c"] == H_c and r["dt"] == dt])
+            per_dt[dt] = combine([r for r in runs if r["H_c"] == H_c and r["dt"] == dt], scatter)
         if not per_dt:
             continue
         steps = sorted(per_dt, reverse=True)
@@ -153,19 +201,48 @@ def reference():
                "step_differences": differences,
                "steps": {str(dt): {k: v for k, v in c.items() if k not in ("R", "times")}
                          for dt, c in per_dt.items()}}
-        if H_c == 0.25:  # R(t): every corrected run pooled (their steps agree)
-            n = sum(c["paths"] for c in per_dt.values())
-            R = sum(c["paths"] * c["R"] for c in per_dt.values()) / n
-            lo, hi = _wilson(np.round(R * n), n)
-            row["survival"] = {"t": per_dt[steps[0]]["times"].tolist(), "R": R.tolist(), "R_lo": lo.tolist(),
-                               "R_hi": hi.tolist(), "paths": n}
+        # R(t): the runs of the reference's steps pooled (Kaplan-Meier = empirical survival: censoring at t_max only)
+        used = [per_dt[dt] for dt in (steps if pooled else steps[-1:])]
+        n = sum(c["paths"] for c in used)
+        R = sum(c["paths"] * c["R"] for c in used) / n
+        lo, hi = _wilson(np.round(R * n), n)
+        row["survival"] = {"t": used[0]["times"].tolist(), "R": R.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
+                           "paths": n, "max_half_width": float(np.max(hi - lo) / 2)}
         out["levels"][str(H_c)] = row
         print(json.dumps({"H_c": H_c, **{k: v for k, v in row.items() if k != "survival"}}), flush=True)
     REFERENCE.write_text(json.dumps(out, indent=1) + "\n")
 
 
+def survival(grids=((60, 64), (120, 128)), steps=2000):
+    """fpk's R(t) against the stored Kaplan-Meier curves at every level: sup |R_fpk - R_mc|, where, the largest
+    excess over the Monte Carlo's 95 % half-width, that half-width, and fpk's CPU seconds. Writes SURVIVAL."""
+    from averaging.phase_plane import first_passage_fpk
+
+    model = DuffingImpact(restitution=Ma(vc=0.4))
+    levels = json.loads(REFERENCE.read_text())["levels"]
+    out = {"script": "benchmarks/first_passage_reference.py survival", "steps": steps, "levels": {}}
+    for H_c in LEVELS:
+        sv = levels[str(H_c)]["survival"]
+        t, R, lo, hi = (np.array(sv[k]) for k in ("t", "R", "R_lo", "R_hi"))
+        half = (hi - lo) / 2
+        row = {"paths": sv["paths"], "mc_max_half_width": float(half.max()), "grids": {}}
+        for grid in grids:
+            c0 = time.process_time()
+            r = first_passage_fpk(model, f"H < {H_c}", grid=grid, check=False, t_max=float(t[-1]), steps=steps)
+            cpu = time.process_time() - c0
+            gap = np.abs(r.survival(t) - R)
+            k = int(np.argmax(gap))
+            row["grids"][f"{grid[0]}x{grid[1]}"] = {
+                "sup_gap": float(gap[k]), "at_t": float(t[k]), "R_there": float(R[k]),
+                "half_width_there": float(half[k]), "max_excess_over_half_width": float(np.max(gap - half)),
+                "cpu_seconds": cpu}
+        out["levels"][str(H_c)] = row
+        print(json.dumps({str(H_c): row}), flush=True)
+    SURVIVAL.write_text(json.dumps(out, indent=1) + "\n")
+
+
 def main(argv):
-    if not argv or argv[0] not in ("run", "plan", "reference", "validate"):
+    if not argv or argv[0] not in ("run", "plan", "reference", "validate", "survival", "near"):
         print(__doc__)
         return 2
     if argv[0] == "plan":
@@ -177,14 +254,25 @@ def main(argv):
     if argv[0] == "reference":
         reference()
         return 0
+    if argv[0] == "survival":
+        survival()
+        return 0
     if argv[0] == "validate":
         rows = [r for r in load_runs() if r["H_c"] == 0.25]
         for r in sorted(rows, key=lambda r: (r["corrected"], -r["dt"])):
             print(f"corrected={r['corrected']!s:5} dt={r['dt']:<8g} paths={r['paths']:>7} "
                   f"mean={r['mean']:.4f} +- {r['ci95']:.4f}")
         return 0
+    if argv[0] == "near":
+        out = near_level(float(argv[1]), float(argv[2]), int(argv[3]), int(argv[4]), "--uncorrected" not in argv)
+        with open(NEAR, "a") as fh:
+            fh.write(json.dumps(out) + "\n")
+        print(json.dumps({k: out[k] for k in ("H0", "dt", "paths", "seed", "corrected", "cpu_seconds")}),
+              "R at t = 1, 5:", out["R"][19], out["R"][-1], flush=True)
+        return 0
     H_c, dt, paths, seed = float(argv[1]), float(argv[2]), int(argv[3]), int(argv[4])
-    out = run(H_c, dt, paths, seed, corrected="--uncorrected" not in argv)
+    scheme = argv[argv.index("--scheme") + 1] if "--scheme" in argv else "splitting"
+    out = run(H_c, dt, paths, seed, corrected="--uncorrected" not in argv, scheme=scheme)
     with open(RUNS, "a") as fh:
         fh.write(json.dumps(out) + "\n")
     print(json.dumps({k: v for k, v in out.items() if k not in ("times", "R", "R_lo", "R_hi")}), flush=True)

@@ -5,8 +5,8 @@ Example 1 (Duffing a = 1, b = 0.2, c = 0.025, D = 0.05, walls at +-1, Ma V_C = 0
 time H reaches H_c. Above the barrier energy (0.55) every orbit impacts hard, and the averaged energy ('paper',
 'jump') misses the rhythm of the impacts: at H_c = 2 it is 15-18 % short of event-exact Monte Carlo. The phase-plane
 generator (method 'fpk') keeps the impacts where they happen: one sparse solve for the mean, BDF2 for the survival
-R(t) = P(T > t), an error estimate from a grid twice coarser. Also: ``|x| < 0.9`` (a level of x), with the Poisson
-estimate exp(-nu t) from Rice's out-crossing rate nu beside the exact survival.
+R(t) = P(T > t), an error estimate from half the rings and half the angles. Also: ``|x| < 0.9`` (a level of x), with
+the Poisson estimate exp(-nu t) from Rice's out-crossing rate nu beside the exact survival.
 
 Run:  python examples/11_first_passage.py [--quick]   (headless; exits 1 if a check fails)
 """

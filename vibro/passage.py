@@ -276,16 +276,17 @@ def spectrum(model, observable: str = "x", method: str = "fpk", **options) -> Sp
 
 def spectrum_mc(model, observable: str = "x", *, dt: float = 0.01, t_end: float = 2100.0, t_burn: float = 100.0,
                 paths: int = 64, every: int = 20, segment: int = 512, chunk_paths: int = 8, seed: int = 1,
-                scheme: str = "splitting") -> Spectrum:
+                scheme: str = "splitting", scheduler=None, workers: int | None = None) -> Spectrum:
     """The one-sided PSD by Monte Carlo (Welch, :func:`hybrid.stochastic._welch.welch_spectrum`), as a
     :class:`Spectrum` with the 95 % batch-means half-width per frequency in ``details['ci']``.
 
     The variance is the samples' own, so ``variance_check`` tests the normalisation; the frequency resolution
-    2 pi / (segment every dt) and the band edge pi / (every dt) are in ``details``.
+    2 pi / (segment every dt) and the band edge pi / (every dt) are in ``details``. ``scheduler`` (None/"threads"
+    with ``workers`` threads, "dask", "dask=ADDRESS" or a ``distributed.Client``) never changes a number.
     """
     from hybrid.stochastic._welch import welch_spectrum
 
     w = welch_spectrum(model, observable, scheme, dt=dt, t_end=t_end, t_burn=t_burn, paths=paths, every=every,
-                       segment=segment, chunk_paths=chunk_paths, seed=seed)
+                       segment=segment, chunk_paths=chunk_paths, seed=seed, scheduler=scheduler, workers=workers)
     return Spectrum("mc", observable, w.omega, w.S, w.variance, w.mean,
                     details={"ci": w.ci, "chunks": w.chunks, **w.settings})

@@ -213,8 +213,10 @@ def _impact_weights(grid: RingGrid, side: str, law, rings, n_sub: int = 16):
 class Discretisation:
     """The assembled operator on a :class:`RingGrid` (rows = net outflow of each cell)."""
 
-    def __init__(self, grid: RingGrid, coef: Coefficients, law, impact_order: int = 2, phase_order: int = 1):
+    def __init__(self, grid: RingGrid, coef: Coefficients, law, impact_order: int = 2, phase_order: int = 1,
+                 arc_end_order: int = 1):
         self.grid, self.coef = grid, coef
+        self.arc_end_order = int(arc_end_order)
         n = grid.n
         ring = grid.ring
         cells = coef.at(grid.H_c[ring], grid.psi)
@@ -287,6 +289,21 @@ class Discretisation:
             rows.append(cin), cols.append(cin), vals.append(out)
             jj, kk = np.nonzero(W.T)  # target row jj (ring index in rings_in), source kk
             rows.append(cout[jj]), cols.append(cin[kk]), vals.append(-out[kk] * W.T[jj, kk])
+            if self.arc_end_order == 2:
+                # the density at the wall extrapolated linearly from cin and the cell upstream of it (the flow
+                # turns towards lower psi: nxt), not cin's centre value: the same flux leaves and re-enters
+                up2 = grid.neighbours()[1][cin]
+                ok = up2 >= 0
+                slope = np.where(ok, grid.width[cin] / (grid.width[cin] + np.where(ok, grid.width[up2], 1.0)), 0.0)
+                c_in, c_up, o = cin[ok], up2[ok], out[ok] * slope[ok]
+                rows += [c_in, c_in]
+                cols += [c_in, c_up]
+                vals += [o, -o]
+                Wk = W.T[:, ok]
+                jj2, kk2 = np.nonzero(Wk)
+                rows += [cout[jj2], cout[jj2]]
+                cols += [c_in[kk2], c_up[kk2]]
+                vals += [-o[kk2] * Wk[jj2, kk2], o[kk2] * Wk[jj2, kk2]]
             if impact_order == 2 and len(rings_in) > 2:
                 # slope of the wall flux density across rings: central, one-sided at the ends
                 m = len(rings_in)
@@ -342,6 +359,17 @@ class Discretisation:
         cu = np.where(uniform, 1.0 - 0.25 * (1 + kap) + 0.25 * (1 - kap), 1.0)
         cd = np.where(uniform, 0.25 * (1 + kap), 0.0)
         cf = np.where(uniform, -0.25 * (1 - kap), 0.0)
+        if self.arc_end_order == 2:
+            # near an arc's end (cells cut by a wall, or no cell upstream of the upwind one): linear
+            # reconstruction instead of first-order upwind; upwind-biased where the far cell exists, else
+            # interpolated between the two cells of the face (the face is at half the upwind cell's width)
+            w = grid.width
+            has_far = far >= 0
+            t_far = w[up] / (w[up] + w[np.maximum(far, 0)])
+            t_down = w[up] / (w[up] + w[down])
+            cu = np.where(uniform, cu, np.where(has_far, 1.0 + t_far, 1.0 - t_down))
+            cd = np.where(uniform, cd, np.where(has_far, 0.0, t_down))
+            cf = np.where(uniform, cf, np.where(has_far, -t_far, 0.0))
         return sps.csr_matrix(
             (np.r_[dH * a * cu, dH * a * cd, dH * a * cf], (np.r_[ar, ar, ar], np.r_[up, down, np.maximum(far, 0)])),
             shape=(len(L), n),

@@ -397,7 +397,7 @@ def _walls(model, walls):
 
 def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model", restitution=None,
                       points: int = 2000, *, impact_order: int = 2, phase_order: int = 3,
-                      stretch: float = DEFAULT_STRETCH) -> PhaseDensity:
+                      stretch: float = DEFAULT_STRETCH, arc_end_order: int = 1) -> PhaseDensity:
     """One solve on one grid, no accuracy check: the lower-level entry (walls given by position).
 
     Parameters
@@ -416,6 +416,12 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
         Overrides the model's law.
     points : int
         Energies of the output p(H) grid.
+    arc_end_order : {1, 2}
+        The phase convection's order where an arc ends at a wall (its cells cut by the wall, no cell upstream of
+        the upwind one) and at the wall itself: 1, first-order upwind (the default); 2, linear reconstruction
+        (upwind-biased where possible, else between the face's two cells; the density at the wall extrapolated
+        from the two cells before it). The spectrum uses 2: on the folded oscillator (80 x 96) its L1 error falls
+        from 0.010 to 0.0007.
 
     Examples
     --------
@@ -446,7 +452,9 @@ def solve_phase_plane(model, grid=DEFAULT_GRID, h_max: float = 4.0, walls="model
     if not 0.0 < stretch <= 1.0:
         raise ParameterError(f"stretch={stretch!r} must lie in (0, 1]")
     g = RingGrid(h_max, n_e, n_p, wall_H, stretch)
-    disc = Discretisation(g, _coefficients(model, law), law.coefficient, impact_order, phase_order)
+    if arc_end_order not in (1, 2):
+        raise ParameterError(f"arc_end_order={arc_end_order!r}; use 1 or 2")
+    disc = Discretisation(g, _coefficients(model, law), law.coefficient, impact_order, phase_order, arc_end_order)
     t1 = time.perf_counter()
     p = disc.solve()
     t2 = time.perf_counter()
@@ -517,7 +525,7 @@ def is_single_well(model) -> bool:
 def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model", restitution=None,
                           points: int = 2000, check: bool = True, tol: float = 0.005,
                           order: float | None = None, scheme: str = "auto",
-                          stretch: float = DEFAULT_STRETCH) -> PhaseDensity:
+                          stretch: float = DEFAULT_STRETCH, arc_end_order: int = 1) -> PhaseDensity:
     """Stationary density p(x, y) of ``model`` with impact boundary conditions, and p(H), marginals, impacts.
 
     Parameters
@@ -549,6 +557,8 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
         wells (a double-well Duffing); p(H) then starts at min G < 0.
     stretch : float
         Rings only: the ratio of the innermost ring's width to the uniform one (see :func:`solve_phase_plane`).
+    arc_end_order : {1, 2}
+        Rings only: the phase flux's order at the ends of the arcs that walls cut (see :func:`solve_phase_plane`).
 
     Returns
     -------
@@ -589,7 +599,8 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
         raise ParameterError(f"h_max={h_max!r} must be a finite positive energy")
     check_energy_range(model, float(h_max), walls)
     h = _first_range(model, float(h_max))
-    sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3, stretch=stretch)
+    sd = solve_phase_plane(model, grid, h, walls, restitution, points if h == h_max else 3, stretch=stretch,
+                           arc_end_order=arc_end_order)
     for _ in range(16):
         # rings spread over a range far wider than the mass would put it into the first few: solve where it is
         top = _mass_energy(sd)
@@ -599,7 +610,7 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
             break
         else:
             h = 1.25 * top
-        sd = solve_phase_plane(model, grid, h, walls, restitution, 3, stretch=stretch)
+        sd = solve_phase_plane(model, grid, h, walls, restitution, 3, stretch=stretch, arc_end_order=arc_end_order)
     if h < h_max or len(sd.H) != int(points):  # the last solve may have widened back to h_max with 3 points
         sd.h_max = float(h_max)
         sd.H = output_grid(h, float(h_max), int(points))
@@ -618,9 +629,11 @@ def stationary_density_xy(model, grid=None, h_max: float = 4.0, *, walls="model"
                       GridWarning, stacklevel=2)
     coarse_grid = (max(8, grid[0] // 2), max(16, grid[1] // 2))
     quarter_grid = (max(8, grid[0] // 4), max(16, grid[1] // 4))
-    half = solve_phase_plane(model, coarse_grid, h, walls, restitution, 3, stretch=stretch)
+    half = solve_phase_plane(model, coarse_grid, h, walls, restitution, 3, stretch=stretch,
+                             arc_end_order=arc_end_order)
     # the third grid costs 1/16 of the first: the observed order (the estimate is safe where convergence is slow)
-    quarter = (solve_phase_plane(model, quarter_grid, h, walls, restitution, 3, stretch=stretch)
+    quarter = (solve_phase_plane(model, quarter_grid, h, walls, restitution, 3, stretch=stretch,
+                                 arc_end_order=arc_end_order)
                if quarter_grid != coarse_grid else None)
     sd._coarse = (half, quarter)
     sd._tail = tail

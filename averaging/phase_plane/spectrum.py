@@ -39,6 +39,12 @@ where the energy-angle coordinates are singular, puts a first-order error into t
 innermost ring's width: on the free linear oscillator (c = 0.2, 80 x 96) the L1 error is 0.015 with the stationary
 solver's 0.4 and 0.0027 with 0.02 (``benchmarks/spectrum_accuracy.py``)."""
 
+SPECTRUM_ARC_END_ORDER = 2
+"""The phase flux's order at the arcs' ends, where walls cut the rings (:func:`solve_phase_plane`'s
+``arc_end_order``): the first-order upwind flux there smeared the phase and hence the harmonics; linear
+reconstruction cuts the folded oscillator's L1 error from 0.010 to 0.0007 on 80 x 96
+(``benchmarks/spectrum_accuracy.py``)."""
+
 MAX_ORDER = 2.5
 """Highest convergence order the three-grid estimate and extrapolation accept (observed: 1.9 on the folded
 oscillator, about 1.3-1.6 on the free one)."""
@@ -221,7 +227,7 @@ class _Resolvent:
 def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, points: int = 150,
                  refine: int = 100, grid=SPECTRUM_GRID, h_max: float = 4.0, walls="model",
                  restitution=None, check: bool = False, extrapolate: bool = False,
-                 stretch: float = SPECTRUM_STRETCH) -> Spectrum:
+                 stretch: float = SPECTRUM_STRETCH, arc_end_order: int = SPECTRUM_ARC_END_ORDER) -> Spectrum:
     """One-sided PSD of ``observable`` from the phase-plane generator (one complex sparse solve per frequency).
 
     Parameters
@@ -249,6 +255,9 @@ def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, p
         cases: folded oscillator on 160 x 192, 0.0024 unextrapolated and 0.0007 extrapolated).
     stretch : float
         Innermost ring width over the uniform one (:data:`SPECTRUM_STRETCH`; see :func:`solve_phase_plane`).
+    arc_end_order : {1, 2}
+        The phase flux's order where walls end the arcs (:data:`SPECTRUM_ARC_END_ORDER`; see
+        :func:`solve_phase_plane`).
 
     Returns
     -------
@@ -278,7 +287,7 @@ def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, p
             raise ParameterError("omega must hold finite frequencies >= 0")
     t0 = time.perf_counter()
     sd = stationary_density_xy(model, grid=grid, h_max=h_max, walls=walls, restitution=restitution, check=False,
-                               stretch=stretch)
+                               stretch=stretch, arc_end_order=arc_end_order)
     f = observable_values(model, observable, sd.cell_x, sd.cell_y)
     mean = float(sd.cell_mass @ f)
     g = f - mean
@@ -311,7 +320,7 @@ def spectrum_fpk(model, observable="x", *, omega=None, omega_max: float = 3.0, p
         def coarser(factor):
             g = (max(8, int(grid[0]) // factor), max(16, int(grid[1]) // factor))
             sdc = stationary_density_xy(model, grid=g, h_max=h_max, walls=walls, restitution=restitution,
-                                        check=False, stretch=stretch)
+                                        check=False, stretch=stretch, arc_end_order=arc_end_order)
             fc = observable_values(model, observable, sdc.cell_x, sdc.cell_y)
             gc = fc - float(sdc.cell_mass @ fc)
             resc = _Resolvent(sdc, gc)

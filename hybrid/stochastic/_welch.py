@@ -5,11 +5,14 @@ Normalisation: the one-sided density in the angular frequency omega >= 0, with t
 
     S(omega) = (1 / pi) * integral of C(tau) cos(omega tau) over the whole line,   C the autocovariance.
 
-Each chunk of paths is recorded after the burn-in (``sample_paths``, every ``every`` steps), cut into segments of
-``segment`` samples overlapping by half, each segment detrended by its mean, windowed (Hann) and transformed; the
-periodograms |X(omega_k)|^2 dt_s / (pi n U) (U the window's mean square) are averaged. The chunks are independent
-(their seeds come from one SeedSequence), so their spectra merge by averaging and their spread gives a batch-means
-95 % interval at every frequency. The resolution is 2 pi / (segment dt_s) and the band ends at pi / dt_s.
+Each chunk of paths is recorded after the burn-in (``sample_paths``, every ``every`` steps) and cut into segments
+of ``segment`` samples overlapping by half; each segment is windowed (Hann) and transformed. A chunk returns only
+sums (:func:`welch_chunk_sums`: of abs(X)**2, of X, of the values and their squares, and the counts), so chunks
+merge by addition, in chunk order: the same seed gives the same numbers on any number of threads or Dask workers.
+After the merge every segment is centred on the grand mean (exact, from the sums of X) and the periodograms
+abs(X(omega_k))**2 dt_s / (pi n U) (U the window's mean square) are averaged. The chunks are independent (their
+seeds come from one SeedSequence), so the spread of their spectra gives a batch-means 95 % interval at every
+frequency. The resolution is 2 pi / (segment dt_s) and the band ends at pi / dt_s.
 """
 
 from __future__ import annotations
@@ -68,24 +71,117 @@ class WelchSpectrum:
                 f"{self.variance:.4g}, peak at {self.peak_omega:.4g}, {self.chunks} chunks)")
 
 
-def _periodograms(values: np.ndarray, segment: int, dt_s: float) -> tuple[np.ndarray, int]:
-    """Sum of the one-sided Hann periodograms of every half-overlapping segment of every row; and their number."""
-    window = np.hanning(segment + 2)[1:-1]  # no zero end points: every sample counts
-    norm = dt_s / (math.pi * segment * float(np.mean(window**2)))
-    starts = range(0, values.shape[1] - segment + 1, segment // 2)
-    total, count = np.zeros(segment // 2 + 1), 0
-    for s in starts:
-        block = values[:, s:s + segment]
-        block = (block - block.mean(axis=1, keepdims=True)) * window
-        spec = np.abs(np.fft.rfft(block, axis=1)) ** 2 * norm
-        total += spec.sum(axis=0)
-        count += block.shape[0]
-    return total, count
+def _window(segment: int) -> np.ndarray:
+    """The Hann window without its zero end points (every sample counts)."""
+    return np.hanning(segment + 2)[1:-1]
+
+
+def _observable_function(model, observable: str):
+    """The observable as a numeric function of (x, y), the model's parameters substituted (picklable inputs only:
+    a Dask worker builds it again from the text)."""
+    import sympy as sp
+
+    x, y = sp.symbols("x y")
+    names = {"x": x, "y": y, **{k: sp.Symbol(k) for k in model.params}}
+    text = observable.strip()
+    try:
+        expr = model.energy_expr if text == "H" else sp.sympify(text, locals=names)
+    except (sp.SympifyError, SyntaxError, TypeError, ValueError):
+        raise ParameterError(f"observable {observable!r} is not an expression in x, y, H") from None
+    if not isinstance(expr, sp.Expr):
+        raise ParameterError(f"observable {observable!r} must be an expression, not a condition")
+    unknown = sorted(str(s) for s in expr.free_symbols if str(s) not in names)
+    if unknown:
+        raise ParameterError(f"observable {observable!r} uses {unknown}: give an expression in x, y and the model's "
+                             f"parameters {sorted(model.params)}, or H")
+    expr = expr.xreplace({sp.Symbol(k): v for k, v in model.params.items()})
+    expr = expr.xreplace({s: names[str(s)] for s in expr.free_symbols if str(s) in ("x", "y")})
+    return lambdify_numeric((x, y), expr)
+
+
+def welch_chunk_sums(model, observable: str, scheme: str, dt: float, t_end: float, t_burn: float, paths: int,
+                     every: int, segment: int, seed: int, x0) -> dict:
+    """The additive sums of one chunk of paths: everything Welch's estimate needs, mergeable by addition.
+
+    ``power`` is the sum over the chunk's half-overlapping segments of abs(X)**2 and ``linear`` the sum of X, X the
+    DFT of the windowed raw segment; ``segments``, ``samples``, ``sum``, ``sum_sq`` count the segments and sum the
+    recorded values and their squares. Centring on the grand mean m after the merge is exact:
+    abs(X - m W)**2 = abs(X)**2 - 2 m Re(X conj(W)) + m**2 abs(W)**2, W the window's DFT.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> m = ImpactOscillator("x", "c*y", parameters={"c": 0.2, "D": 0.05}, barriers=None)
+    >>> part = welch_chunk_sums(m, "x", "splitting", 0.01, 120.0, 20.0, 4, 10, 64, 7,
+    ...                         (0.0, 0.0))                                   # doctest: +SKIP
+    >>> part["power"].shape, part["samples"]                                 # doctest: +SKIP
+    ((33,), 4004)
+    """
+    from ._runner import sample_paths
+
+    value = _observable_function(model, observable)
+    _, xs, ys = sample_paths(model, scheme, dt=dt, t_end=t_end, paths=paths, every=every, seed=seed, x0=x0)
+    start = int(round(t_burn / (dt * every)))
+    obs = np.broadcast_to(np.asarray(value(xs[:, start:], ys[:, start:]), dtype=float), xs[:, start:].shape)
+    if not np.all(np.isfinite(obs)):
+        raise ParameterError(f"observable {observable!r} is not finite on the recorded paths")
+    window = _window(segment)
+    power = np.zeros(segment // 2 + 1)
+    linear = np.zeros(segment // 2 + 1, dtype=complex)
+    segments = 0
+    for s in range(0, obs.shape[1] - segment + 1, segment // 2):  # a fixed order: the same sums on any executor
+        spec = np.fft.rfft(obs[:, s:s + segment] * window, axis=1)
+        power += (spec.real**2 + spec.imag**2).sum(axis=0)
+        linear += spec.sum(axis=0)
+        segments += obs.shape[0]
+    return {"power": power, "linear": linear, "segments": segments, "samples": int(obs.size),
+            "sum": float(obs.sum()), "sum_sq": float((obs * obs).sum())}
+
+
+def _merge(parts: list[dict]) -> dict:
+    """Sum the chunks' sums in chunk order (floating-point addition is not associative: a fixed order gives the
+    same numbers on any number of threads or workers)."""
+    total = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in parts[0].items()}
+    for part in parts[1:]:
+        for k, v in part.items():
+            total[k] = total[k] + v
+    return total
+
+
+def _centred_spectrum(part: dict, mean: float, segment: int, dt_s: float) -> np.ndarray:
+    """The averaged one-sided periodogram of the segments in ``part``, each centred on ``mean``."""
+    window = _window(segment)
+    W = np.fft.rfft(window)
+    n = part["segments"]
+    power = (part["power"] - 2 * mean * (part["linear"] * np.conj(W)).real + n * mean * mean * np.abs(W) ** 2)
+    return power / n * dt_s / (math.pi * segment * float(np.mean(window**2)))
+
+
+def _run_chunks(tasks, scheduler, workers) -> list[dict]:
+    """``welch_chunk_sums(*task)`` for every task, on local threads (the kernel releases the GIL) or Dask; the
+    results in task order whatever order they finish in."""
+    if scheduler in (None, "threads", "local"):
+        if workers is None:
+            import numba
+
+            workers = numba.get_num_threads()
+        if workers == 1:
+            return [welch_chunk_sums(*task) for task in tasks]
+        from concurrent.futures import ThreadPoolExecutor
+
+        first = welch_chunk_sums(*tasks[0])  # alone: the kernel is compiled or loaded once, not by every thread
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            return [first, *pool.map(lambda task: welch_chunk_sums(*task), tasks[1:])]
+    from ._auto_exec import dask_client
+
+    with dask_client(scheduler) as client:
+        futures = [client.submit(welch_chunk_sums, *task, pure=False, retries=3) for task in tasks]
+        return [f.result() for f in futures]
 
 
 def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, dt: float, t_end: float,
                    t_burn: float, paths: int, every: int = 10, segment: int = 1024, chunk_paths: int = 8,
-                   seed: int = 1, x0=(0.0, 0.0)) -> WelchSpectrum:
+                   seed: int = 1, x0=(0.0, 0.0), scheduler=None, workers: int | None = None) -> WelchSpectrum:
     """The one-sided PSD of ``observable`` (an expression in x and y, or ``H``) by Monte Carlo (Welch).
 
     Parameters
@@ -104,6 +200,9 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
         Record every ``every`` steps; segments of ``segment`` recorded samples (an even number).
     seed : int
         Root seed: chunk k draws from ``SeedSequence(seed).spawn(chunks)[k]``.
+    scheduler : None, "threads", "dask", "dask=ADDRESS" or a ``distributed.Client``
+        Where the chunks run; ``workers`` local threads (default ``numba.get_num_threads()``). The chunks' sums
+        are merged in chunk order, so the numbers are the same on any of them.
 
     Returns
     -------
@@ -118,13 +217,12 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
     >>> round(s.peak_omega, 1)                                               # doctest: +SKIP
     1.0
     """
-    import sympy as sp
-
-    from ._runner import sample_paths
-
     for name, value in (("paths", paths), ("every", every), ("segment", segment), ("chunk_paths", chunk_paths)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ParameterError(f"{name}={value!r} must be a positive integer")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
+                                or workers < 1):
+        raise ParameterError(f"workers={workers!r} must be a positive integer")
     if segment < 8 or segment % 2:
         raise ParameterError(f"segment={segment} must be an even number of at least 8 samples")
     if not (math.isfinite(t_burn) and 0 <= t_burn < t_end):
@@ -137,38 +235,29 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
     chunks = -(-paths // chunk_paths)
     if chunks < 2:
         raise ParameterError(f"paths={paths} in chunks of {chunk_paths} gives one chunk: the interval needs several")
-    x, y = sp.symbols("x y")
-    names = {"x": x, "y": y, **{k: sp.Symbol(k) for k in model.params}}
-    text = observable.strip()
-    expr = model.energy_expr if text == "H" else sp.sympify(text, locals=names)
-    unknown = sorted(str(s) for s in expr.free_symbols if str(s) not in names)
-    if unknown:
-        raise ParameterError(f"observable {observable!r} uses {unknown}: give an expression in x, y and the model's "
-                             f"parameters {sorted(model.params)}, or H")
-    expr = expr.xreplace({sp.Symbol(k): v for k, v in model.params.items()})
-    expr = expr.xreplace({s: names[str(s)] for s in expr.free_symbols if str(s) in ("x", "y")})
-    value = lambdify_numeric((x, y), expr)
+    if isinstance(scheduler, str) and not (scheduler in ("threads", "local")
+                                           or scheduler.partition("=")[0] == "dask"):
+        raise ParameterError(f"scheduler={scheduler!r}; the Monte Carlo spectrum runs on threads, dask, dask=ADDRESS "
+                             "or a distributed.Client (not yet on the GPU)")
+    _observable_function(model, observable)  # refuse a bad observable before any path is run
     seeds = np.random.SeedSequence(seed).spawn(chunks)
-    chunk_spectra, sums, squares, samples = [], 0.0, 0.0, 0
-    for k in range(chunks):
-        n = min(chunk_paths, paths - k * chunk_paths)
-        root = int(seeds[k].generate_state(1, dtype=np.uint64)[0] % (2**62))
-        _, xs, ys = sample_paths(model, scheme, dt=dt, t_end=t_end, paths=n, every=every, seed=root, x0=x0)
-        start = int(round(t_burn / dt_s))
-        obs = np.broadcast_to(np.asarray(value(xs[:, start:], ys[:, start:]), dtype=float), xs[:, start:].shape)
-        if not np.all(np.isfinite(obs)):
-            raise ParameterError(f"observable {observable!r} is not finite on the recorded paths")
-        total, count = _periodograms(obs, segment, dt_s)
-        chunk_spectra.append(total / count)
-        sums += float(obs.sum())
-        squares += float((obs**2).sum())
-        samples += obs.size
-    spectra = np.array(chunk_spectra)
-    mean = sums / samples
+    tasks = [(model, observable, scheme, dt, t_end, t_burn, min(chunk_paths, paths - k * chunk_paths), every,
+              segment, int(seeds[k].generate_state(1, dtype=np.uint64)[0] % (2**62)), x0) for k in range(chunks)]
+    parts = _run_chunks(tasks, scheduler, workers)
+    total = _merge(parts)
+    mean = total["sum"] / total["samples"]
+    # centred on the grand mean (exact after the merge), not on each segment's own mean, which would take the
+    # segment's lowest frequencies out with it
+    spectra = np.array([_centred_spectrum(part, mean, segment, dt_s) for part in parts])
+    S = _centred_spectrum(total, mean, segment, dt_s)
     omega = 2 * math.pi * np.fft.rfftfreq(segment, d=dt_s)
-    half = 1.959963984540054 * spectra.std(axis=0, ddof=1) / math.sqrt(chunks)
-    return WelchSpectrum(omega=omega, S=spectra.mean(axis=0), ci=half, variance=squares / samples - mean * mean,
-                         mean=mean, chunks=chunks,
+    weights = np.array([part["segments"] for part in parts], dtype=float)
+    # batch means over the chunks, weighted by their segments (the last chunk may be short)
+    spread = np.sqrt(np.sum(weights[:, None] * (spectra - S) ** 2, axis=0) / (weights.sum() * (chunks - 1)))
+    half = 1.959963984540054 * spread
+    return WelchSpectrum(omega=omega, S=S, ci=half,
+                         variance=total["sum_sq"] / total["samples"] - mean * mean, mean=mean, chunks=chunks,
                          settings={"scheme": scheme, "dt": dt, "t_end": t_end, "t_burn": t_burn, "paths": paths,
                                    "every": every, "segment": segment, "chunk_paths": chunk_paths, "seed": seed,
+                                   "segments": int(total["segments"]),
                                    "resolution": 2 * math.pi / (segment * dt_s), "band_edge": math.pi / dt_s})

@@ -56,7 +56,7 @@ def register(subparsers) -> None:
     p.add_argument("--h-max", type=float, default=4.0, dest="h_max",
                    help="fpk: top energy of the grid for domains other than H < H_c (choose it above the domain)")
     p.add_argument("--no-check", action="store_true",
-                   help="fpk: skip the error estimate from a grid twice coarser")
+                   help="fpk: skip the error estimate (from half the rings and half the angles)")
     p.add_argument("--points", type=int, default=2000, help="paper/jump: energy nodes on [0, H_c]")
     p.add_argument("--paths", type=int, default=2000, help="mc: paths; cost ∝ paths x t-max / dt")
     p.add_argument("--dt", type=float, default=0.002, help="mc: time step")
@@ -124,8 +124,8 @@ def run(args) -> int:
                "decay_rate": r.decay_rate if math.isfinite(r.decay_rate) else None}
     if "ci" in r.details:
         results["ci"] = r.details["ci"]
-    for key in ("out_crossing_rate", "stationary_impact_rate", "censored", "mean_time_coarse", "probability",
-                "speedup"):
+    for key in ("out_crossing_rate", "stationary_impact_rate", "censored", "mean_time_coarse_rings",
+                "mean_time_coarse_angles", "probability", "speedup"):
         if key in r.details:
             results[key] = r.details[key]
     settings = {"method": method, "domain": args.domain, "start": start if isinstance(start, str) else list(start),
