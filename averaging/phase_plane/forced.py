@@ -31,7 +31,8 @@ falls from 7.8e-3 with Crank-Nicolson alone at 64 steps to 4.5e-4 with 32 + 64).
 columns of every A sum to zero). The fixed point p = P p with w.p = 1 (w the cell areas) is found by GMRES on
 (I - P + p0 w^T) p = p0, started at the unforced density p0 (the 2K run at the K run's answer): the rank-one term
 removes the eigenvalue 1 of P without changing the fixed point, and the other eigenvalues of P (the decay of a
-transient over one period, exp(-c T) for the slowest) keep I - P well conditioned: GMRES needs 10-16 period maps.
+transient over one period, exp(-c T) for the slowest) keep I - P well conditioned: GMRES needs 8-11 period maps
+to the default relative residual 1e-6 (10-16 to 1e-10, which changed p(H | t) on example 08 by 4.5e-7 in L1).
 
 Why not the alternatives: a space-time grid with periodic phase couples all K time levels in one system K times
 larger than the plane's (a direct solve does not fit, and its solution is the same fixed point); Fourier modes in
@@ -51,7 +52,8 @@ alone at 2K steps and the combination) is still reported.
 
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): on example 08 (D = 0.02) the L1 of p(H | t)
 against converged Monte Carlo (noise 0.0022) is 0.0028 mean and 0.0045 worst over 16 phases at the default grid
-(64, 128) with 64 + 128 steps (estimate 0.0045), in 45-47 s CPU and 2.6 GB; the linear oscillator's section means
+(64, 128) with 64 + 128 steps (estimate 0.0045), in 32-36 s CPU and 2.2 GB (44-48 s and 2.5 GB before
+the nested-dissection factors and the looser GMRES tolerance); the linear oscillator's section means
 and variances are within 2.3e-6 and 3.5e-5 of the closed form at 64 + 128 steps.
 
 Outputs (:class:`PeriodicDensity`): the density at any time of the period (``section(t)``, a
@@ -578,7 +580,7 @@ def unforced(model):
 
 def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "cartesian",
                         steps: int = DEFAULT_STEPS, phases: int | None = None, walls="model", restitution=None,
-                        points: int = 2000, tol: float = 1e-10, max_iterations: int = 300,
+                        points: int = 2000, tol: float = 1e-6, max_iterations: int = 300,
                         scheme: str = "richardson", check: bool = True, l1_tol: float = 0.005,
                         extrapolate: bool = False) -> PeriodicDensity:
     """Periodic density p(x, y, t) of a periodically forced ``model`` with impact boundary conditions.
@@ -604,7 +606,8 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     walls, restitution, points
         As :func:`~averaging.phase_plane.solve_phase_plane` (``points``: energies of each section's p(H)).
     tol : float
-        Relative residual of GMRES for the fixed point of the period map.
+        Relative residual of GMRES for the fixed point of the period map (1e-6: on example 08, p(H | t) moved by
+        4.5e-7 in L1 from 1e-10, four orders below the discretisation's error, for 7 fewer period maps).
     max_iterations : int
         Most period maps GMRES may apply.
     scheme : {'richardson', 'cn', 'bdf2'}
@@ -820,14 +823,20 @@ def _fixed_point(plane, operators, drifts, dt, scheme, start, tol, max_iteration
     bdf2 = scheme == "bdf2"
     mass_coef, op_coef = (1.5, 1.0) if bdf2 else (1.0, 0.5)
     scale = max(float(np.max(np.abs(d))) for d in drifts)
-    ordering = "COLAMD" if plane.kind == "cartesian" else "MMD_AT_PLUS_A"
+    order = _dissection(plane, operators[0]) if plane.kind == "cartesian" else None
+    # a probe of each drift: drifts whose probes differ by more than the allclose bound can differ nowhere less,
+    # so the search compares arrays only for near-equal probes (the K^2 comparisons cost seconds at 128 steps)
+    probe = np.random.default_rng(0).standard_normal(drifts[0].size)
+    sums = [float(d.ravel() @ probe) for d in drifts]
+    bound = float(np.abs(probe).sum()) * scale * (4e-12 + 4.0 * probe.size * np.finfo(float).eps)  # + round-off
     distinct, lus, step_lu = [], [], []
     for k in range(steps):
-        d = drifts[(k + 1) % steps]
-        same = next((i for i, e in enumerate(distinct) if np.allclose(d, e, rtol=1e-12, atol=1e-12 * scale)), None)
+        d, s = drifts[(k + 1) % steps], sums[(k + 1) % steps]
+        same = next((i for i, (e, se) in enumerate(distinct) if abs(s - se) <= bound
+                     and np.allclose(d, e, rtol=1e-12, atol=1e-12 * scale)), None)
         if same is None:
-            distinct.append(d)
-            lus.append(_factor((mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsc(), ordering))
+            distinct.append((d, s))
+            lus.append(_factor((mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsc(), order))
             same = len(lus) - 1
         step_lu.append(lus[same])
     explicit = None if bdf2 else [(M - 0.5 * A).tocsr() for A in operators]
@@ -867,13 +876,79 @@ def _fixed_point(plane, operators, drifts, dt, scheme, start, tol, max_iteration
     back = snapshots.pop()
     t2 = time.perf_counter()
     periodicity = float(np.max(np.abs(back - p)) / np.max(np.abs(p)))
-    return np.array(snapshots), periodicity, maps[0], len(lus), {"factor": t1 - t0, "march": t2 - t1}
+    factors = len(lus)
+    # free the factors now: the closures above held them past the return (the K run's factors stayed resident
+    # through the 2K run, 0.8 GB at the default grid)
+    lus.clear()
+    step_lu.clear()
+    _release_freed_memory()
+    return np.array(snapshots), periodicity, maps[0], factors, {"factor": t1 - t0, "march": t2 - t1}
 
 
-def _factor(A, ordering="MMD_AT_PLUS_A"):
-    # the rings: a minimum degree ordering of A + A^T fills least; Cartesian cells: COLAMD factors 3x faster (its
-    # 15 % more fill forms larger supernodes)
+def _release_freed_memory():
+    """Hand the heap's free pages back to the system (glibc): the factors' memory, freed, otherwise stays resident
+    (glibc raises its mmap threshold after large frees), and the 2K run's factors came on top of the K run's: peak
+    2.9 GB instead of 2.0 GB at the default grid. Elsewhere nothing is done."""
     try:
-        return spla.splu(A, permc_spec=ordering, diag_pivot_thresh=0.1)
+        import ctypes
+
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _factor(A, order=None):
+    """Sparse LU of a step matrix: Cartesian cells in the nested-dissection ``order`` of :func:`_dissection` (35 %
+    less factor time and 10 % less fill than COLAMD at (64, 128)); the rings in the minimum degree ordering of
+    A + A^T, which fills least there."""
+    try:
+        if order is None:
+            return spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1)
+        return _PermutedLU(spla.splu(A[order][:, order].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.1,
+                                     relax=4, panel_size=16), order)
     except RuntimeError:  # exactly singular with this pivoting
         return spla.splu(A, permc_spec="COLAMD")
+
+
+class _PermutedLU:
+    """The LU of P A P^T (P the permutation ``order``) solving A x = b."""
+
+    def __init__(self, lu, order):
+        self._lu, self._order = lu, order
+
+    def solve(self, b):
+        x = np.empty(len(self._order))
+        x[self._order] = self._lu.solve(b[self._order])
+        return x
+
+
+def _dissection(plane, A, leaf=48):
+    """A nested-dissection order of the Cartesian cells: halve the cells across their longer side, put the cells of
+    the first half that couple to the second (``A``'s pattern, both directions) last, and recurse down to ``leaf``
+    cells. The order sets only the fill of the factors: any order solves exactly."""
+    g = plane.grid
+    ij = np.column_stack([np.rint((g.x - g.x.min()) / g.hx), np.rint((g.y - g.y.min()) / g.hy)]).astype(int)
+    pattern = abs(A).tocsr()
+    pattern = (pattern + pattern.T).tocsr()
+    inside = np.zeros(A.shape[0], dtype=bool)
+    order = []
+
+    def cut(cells):
+        if len(cells) <= leaf:
+            order.append(cells)
+            return
+        spans = ij[cells].max(axis=0) - ij[cells].min(axis=0)
+        key = ij[cells, int(spans[1] > spans[0])]
+        low, high = cells[key < np.median(key)], cells[key >= np.median(key)]
+        if not (len(low) and len(high)):
+            order.append(cells)
+            return
+        inside[high] = True
+        coupled = pattern[low] @ inside.astype(float) > 0
+        inside[high] = False
+        cut(low[~coupled])
+        cut(high)
+        order.append(low[coupled])
+
+    cut(np.arange(A.shape[0]))
+    return np.concatenate(order)
