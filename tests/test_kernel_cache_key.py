@@ -11,7 +11,7 @@ import inspect
 import sympy as sp
 
 from hybrid import HybridAutomaton, Mode
-from hybrid.stochastic import _auto_codegen, _codegen
+from hybrid.stochastic import _auto_codegen, _kernel_modules
 
 
 def _changed_source(monkeypatch, module_name):
@@ -19,7 +19,7 @@ def _changed_source(monkeypatch, module_name):
     real = inspect.getsource
     monkeypatch.setattr(inspect, "getsource",
                         lambda obj: real(obj) + ("\n# changed\n" if obj.__name__ == module_name else ""))
-    _codegen._module_source_hash.cache_clear()
+    _kernel_modules._module_source_hash.cache_clear()
 
 
 def test_a_changed_random_number_generator_changes_the_automaton_kernel_key(monkeypatch):
@@ -33,7 +33,7 @@ def test_a_changed_random_number_generator_changes_the_automaton_kernel_key(monk
         assert _auto_codegen.kernel_key(src) != before
         assert _auto_codegen.source_hash(src) == text  # the source itself is the same text
     finally:
-        _codegen._module_source_hash.cache_clear()
+        _kernel_modules._module_source_hash.cache_clear()
 
 
 def test_a_changed_random_number_generator_changes_the_oscillator_kernel_name(monkeypatch):
@@ -48,4 +48,4 @@ def test_a_changed_random_number_generator_changes_the_oscillator_kernel_name(mo
         _changed_source(monkeypatch, "hybrid.stochastic._rng")
         assert _front.kernel_name(model, "symplectic", src)[0] != before
     finally:
-        _codegen._module_source_hash.cache_clear()
+        _kernel_modules._module_source_hash.cache_clear()

@@ -38,8 +38,8 @@ Examples
 ['em', 'milstein', 'naive', 'splitting']
 """
 
-from ._codegen import cache_dir
 from ._front import Kernel, build_kernel, generate_source
+from ._kernel_modules import cache_dir
 from ._problem import EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._rng import chunk_states, normals, ziggurat_tables
 from ._runner import (

@@ -24,7 +24,7 @@ from hybrid.sizes import check_limit, check_size
 
 from . import _auto_codegen, _auto_exec, _rng
 from ._auto_exec import COUNT_NAMES
-from ._codegen import load_source
+from ._kernel_modules import load_source
 from ._runner import (
     CHATTER_IMPACTS_PER_STEP,
     MAX_PATH_STEPS,

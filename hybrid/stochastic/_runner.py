@@ -34,7 +34,7 @@ from hybrid.errors import (
 from hybrid.io import atomic_write
 from hybrid.sizes import check_limit, check_size
 
-from . import _codegen, _front, _rng, _shared_exec
+from . import _front, _kernel_modules, _rng, _shared_exec
 from ._problem import MAX_MEMORY, MAX_PATH_STEPS, EnsembleProblem, Execution, MonteCarloAlgorithm
 from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
@@ -611,7 +611,7 @@ def solve_ensemble(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm | No
 def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execution):
     """Validate all three groups before anything is compiled; the scheme and the run's settings record."""
     pb, model = problem, problem.model
-    _codegen.refuse_forced(model)
+    _kernel_modules.refuse_forced(model)
     sch = get_scheme(algorithm.scheme)
     x0 = _as_x0(pb.x0)
     settings = _settings(model, sch, algorithm.dt, ex.paths, pb.t_end, pb.t_burn, ex.seed, pb.h_max, pb.bins,
@@ -661,7 +661,7 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
         if not resume and (ckdir / CHECKPOINT_FILE).exists():
             raise ParameterError(f"{ckdir / CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
     law_fn = getattr(model.restitution, "callable", None)
-    if ckdir is not None and law_fn is not None and _codegen.callable_digest(law_fn) is None:
+    if ckdir is not None and law_fn is not None and _kernel_modules.callable_digest(law_fn) is None:
         raise CheckpointError(
             f"the restitution callable {model.restitution!r} reads objects that cannot be fingerprinted, so a "
             "checkpoint could be resumed with another law; run without a checkpoint or declare the law as an "
