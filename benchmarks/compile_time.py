@@ -2,6 +2,7 @@
 
     python benchmarks/compile_time.py            # the three kernels, 3 fresh processes each (about a minute)
     python benchmarks/compile_time.py --reps 1 --functions   # and each numba function's own compile time
+    python benchmarks/compile_time.py --baseline main        # and the same in a ``git archive`` of main, interleaved
 
 Kernels: Example 1 (``simulate_ensemble(DuffingImpact(Ma(0.4)), "milstein")``, the automaton kernel's symplectic
 scheme), the impact pair with ``splitting`` and a forced linear oscillator with phase sections (``splitting``,
@@ -9,8 +10,11 @@ scheme), the impact pair with ``splitting`` and a forced linear oscillator with 
 compiles everything the kernel needs (the random-number helpers too), as on a user's first run. Printed per kernel:
 the wall time and the process CPU time (``time.process_time``: on a shared machine the wall time also counts other
 processes) of the first small run, which is almost all compile (8 paths x 300 to 1,100 steps), and of numba's
-compiles alone (numba's ``numba:compile`` events of top-level functions). The median over repetitions is what
-issue 22 budgets (at most 2 s).
+compiles alone (numba's ``numba:compile`` events of top-level functions), the part of it spent in LLVM (numba's
+``numba:llvm_lock`` events: optimisation and machine code) and the size of the generated kernel source. The median
+over repetitions is what issue 22 budgets (at most 2 s). With ``--baseline REF`` each kernel is also compiled by the
+tree of the git revision REF (``git archive`` into a temporary folder), alternating with this tree, and the ratio of
+the medians is printed: a before/after measured in the same run, under the same load.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from hybrid.stochastic import simulate_automaton, simulate_ensemble
 from models import DuffingImpact, ImpactOscillator, Ma, automata
 
 compiles = []
+llvm = []  # cpu s under numba's LLVM lock (outermost only)
 stack = []  # per open compile: [start wall, start cpu, cpu of the compiles nested in it]
 own = {{}}  # function name -> cpu s of its own compiles, without the functions compiled on the way
 
@@ -55,7 +60,22 @@ class Listener(event.Listener):
             compiles.append((name, time.perf_counter() - w0, cpu))
 
 
+class LlvmListener(event.Listener):
+    depth = 0
+
+    def on_start(self, ev):
+        if not self.depth:
+            llvm.append(-time.process_time())
+        self.depth += 1
+
+    def on_end(self, ev):
+        self.depth -= 1
+        if not self.depth:
+            llvm[-1] += time.process_time()
+
+
 event.register("numba:compile", Listener())
+event.register("numba:llvm_lock", LlvmListener())
 case = {case!r}
 small = dict(dt=0.01, paths=8, t_end=3.0, t_burn=1.0, seed=1)
 w0, c0 = time.perf_counter(), time.process_time()
@@ -72,23 +92,34 @@ else:
                        histograms={{"x": (-3.0, 3.0, 60)}}, phases=8, period=m.forcing_period,
                        **{{**small, "t_end": 11.0}})  # at least one forcing period (4.8) sampled
 wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+import os, pathlib
+kernels = [f for f in pathlib.Path(os.environ["VIBRO_CACHE_DIR"]).glob("*.py")]
 print(json.dumps(dict(wall=wall, cpu=cpu, numba_wall=sum(c[1] for c in compiles),
-                      numba_cpu=sum(c[2] for c in compiles), functions=[c[0] for c in compiles], own=own)))
+                      numba_cpu=sum(c[2] for c in compiles), llvm_cpu=sum(llvm), functions=[c[0] for c in compiles],
+                      own=own, source_lines=sum(len(f.read_text().splitlines()) for f in kernels))))
 """
 
 CASES = ("example1-milstein", "impact-pair-splitting", "forced-phases")
 
 
-def cold(case: str) -> dict:
-    """One cold first run of ``case`` in a fresh process with empty kernel and numba caches."""
+def cold(case: str, tree: Path = ROOT) -> dict:
+    """One cold first run of ``case`` by the source ``tree`` in a fresh process with empty kernel and numba caches."""
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "VIBRO_CACHE_DIR": str(Path(tmp) / "vibro"), "NUMBA_CACHE_DIR": str(Path(tmp) / "numba"),
-               "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-        code = _CHILD.format(tests=str(ROOT / "tests"), case=case)
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+               "PYTHONPATH": str(tree)}
+        code = _CHILD.format(tests=str(tree / "tests"), case=case)
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tree)
         if out.returncode:
             sys.exit(out.stderr)
         return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _line(label: str, runs: list) -> float:
+    med = {k: statistics.median(r[k] for r in runs) for k in ("wall", "cpu", "numba_cpu", "llvm_cpu", "source_lines")}
+    cpus = ", ".join(f"{r['cpu']:.2f}" for r in runs)
+    print(f"{label:34s} {med['wall']:6.2f} / {med['cpu']:6.2f}   numba {med['numba_cpu']:6.2f}   LLVM "
+          f"{med['llvm_cpu']:5.2f}   source {int(med['source_lines']):5d} lines   runs (cpu): {cpus}")
+    return med["cpu"]
 
 
 def main():
@@ -96,21 +127,33 @@ def main():
     ap.add_argument("--reps", type=int, default=3, help="fresh processes per kernel (default 3)")
     ap.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
     ap.add_argument("--functions", action="store_true", help="also each numba function's own compile time")
+    ap.add_argument("--baseline", metavar="REF", help="also compile with the tree of git revision REF, interleaved")
     args = ap.parse_args()
-    print("kernel                   first run wall / cpu (s)   numba compiles wall / cpu (s)   top-level functions")
-    medians = []
-    for case in args.cases:
-        runs = [cold(case) for _ in range(args.reps)]
-        med = {k: statistics.median(r[k] for r in runs) for k in ("wall", "cpu", "numba_wall", "numba_cpu")}
-        medians.append(med["cpu"])
-        print(f"{case:24s} {med['wall']:6.2f} / {med['cpu']:6.2f}            {med['numba_wall']:6.2f} / "
-              f"{med['numba_cpu']:6.2f}                {', '.join(runs[0]['functions'])}")
-        cpus = ", ".join(f"{r['cpu']:.2f}" for r in runs)
-        print(f"{'':24s} runs (cpu): {cpus}")
-        if args.functions:  # each function's own compile, without those it compiles on the way (first run)
-            own = sorted(runs[0]["own"].items(), key=lambda kv: -kv[1])
-            print(f"{'':24s} own cpu s: " + ", ".join(f"{name} {sec:.2f}" for name, sec in own if sec >= 0.05))
-    print(f"median over kernels of the median first-run cpu time: {statistics.median(medians):.2f} s")
+    with tempfile.TemporaryDirectory() as base:
+        if args.baseline:
+            archive = subprocess.run(["git", "archive", args.baseline], cwd=ROOT, capture_output=True, check=True)
+            subprocess.run(["tar", "-x", "-C", base], input=archive.stdout, check=True)
+        print(f"load average at the start: {os.getloadavg()[0]:.1f} (2-core machine: wall times include others' work)")
+        print("kernel (tree)                      first run wall / cpu (s), numba's compiles and LLVM (cpu s)")
+        medians, ratios = [], []
+        for case in args.cases:
+            runs, before = [], []
+            for _ in range(args.reps):  # interleaved: both trees see the same load
+                runs.append(cold(case))
+                if args.baseline:
+                    before.append(cold(case, Path(base)))
+            if args.baseline:
+                old = _line(f"{case} ({args.baseline})", before)
+            medians.append(_line(f"{case} (this tree)", runs))
+            if args.baseline:
+                ratios.append(medians[-1] / old)
+                print(f"{'':34s} after / before: {ratios[-1]:.2f}")
+            if args.functions:  # each function's own compile, without those it compiles on the way (first run)
+                own = sorted(runs[0]["own"].items(), key=lambda kv: -kv[1])
+                print(f"{'':34s} own cpu s: " + ", ".join(f"{name} {sec:.2f}" for name, sec in own if sec >= 0.05))
+        print(f"median over kernels of the median first-run cpu time: {statistics.median(medians):.2f} s (budget 2 s)"
+              + (f"; after / before: {', '.join(f'{r:.2f}' for r in ratios)}" if ratios else ""))
+        print(f"load average at the end: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

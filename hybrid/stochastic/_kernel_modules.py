@@ -5,7 +5,7 @@ target :mod:`._auto_cuda`. The kernels are generated from a model's hybrid autom
 ``$VIBRO_CACHE_DIR`` (default ``~/.cache/vibro-impact``) under a name that hashes the source; numba's ``cache=True``
 keeps the machine code next to it, so a second process loads the kernel instead of compiling it
 (:func:`load_source`). A restitution law given as a Python callable is compiled by numba (:func:`_law_code`) and
-bound in a module built in memory.
+bound in the kernel module (:func:`load_source`).
 """
 
 from __future__ import annotations
@@ -251,8 +251,10 @@ def load_source(name: str, src: str, user_law=None, label: str | None = None) ->
     ``user_law``: a restitution law given as a Python callable, compiled by numba, which the module binds as
     :data:`USER_LAW`. Where ``name`` carries the law's :func:`callable_digest` (``..._law<digest>``), the kernel is
     cached on disk like any other: the digest covers the law's code, constants and the globals it reads, so another
-    law gets another name. Otherwise (a law that reads an object that cannot be hashed) the module is built in memory
-    and compiled in every process. ``label`` names the kernel in the :data:`COMPILE_LOG` record of a compile
+    law gets another name. numba's cache entry refers to the module that defined the law, so another process loads
+    it only where that module can be imported (a script's ``__main__`` always can); elsewhere the entry is compiled
+    again. A law that reads an object that cannot be hashed has no digest: its module is built in memory and compiled
+    in every process. ``label`` names the kernel in the :data:`COMPILE_LOG` record of a compile
     (default: from ``name``).
     """
     if name in _LOADED:
