@@ -3,6 +3,7 @@
     python benchmarks/compile_time.py            # the three kernels, 3 fresh processes each (about a minute)
     python benchmarks/compile_time.py --reps 1 --functions   # and each numba function's own compile time
     python benchmarks/compile_time.py --baseline main        # and the same in a ``git archive`` of main, interleaved
+    python benchmarks/compile_time.py --baseline main --throughput   # and path-steps per CPU s of each kernel
 
 Kernels: Example 1 (``simulate_ensemble(DuffingImpact(Ma(0.4)), "milstein")``, the automaton kernel's symplectic
 scheme), the impact pair with ``splitting`` and a forced linear oscillator with phase sections (``splitting``,
@@ -78,36 +79,49 @@ event.register("numba:compile", Listener())
 event.register("numba:llvm_lock", LlvmListener())
 case = {case!r}
 small = dict(dt=0.01, paths=8, t_end=3.0, t_burn=1.0, seed=1)
+
+
+def run(small):
+    if case == "example1-milstein":
+        simulate_ensemble(DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0), "milstein",
+                          h_max=4.0, bins=400, **small)
+    elif case == "impact-pair-splitting":
+        simulate_automaton(automata.impact_pair(), "splitting", x0=(0.0, 0.0, 0.0, 0.0),
+                           histograms={{"H": (0.0, 1.0, 50), "z": (-0.2, 0.2, 40)}}, **small)
+    else:
+        m = ImpactOscillator("w0**2*x", "c*y", forcing="A*cos(W*t + phi)",
+                             parameters=dict(c=0.5, w0=1.0, W=1.3, A=0.4, phi=0.0, D=0.05), barriers=None)
+        simulate_automaton(m.to_automaton(), "splitting", x0=(0.0, 0.0), observables={{"x": "x"}},
+                           histograms={{"x": (-3.0, 3.0, 60)}}, phases=8, period=m.forcing_period,
+                           **{{**small, "t_end": max(small["t_end"], 11.0)}})  # a forcing period (4.8) sampled
+
+
 w0, c0 = time.perf_counter(), time.process_time()
-if case == "example1-milstein":
-    simulate_ensemble(DuffingImpact(restitution=Ma(0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0), "milstein",
-                      h_max=4.0, bins=400, **small)
-elif case == "impact-pair-splitting":
-    simulate_automaton(automata.impact_pair(), "splitting", x0=(0.0, 0.0, 0.0, 0.0),
-                       histograms={{"H": (0.0, 1.0, 50), "z": (-0.2, 0.2, 40)}}, **small)
-else:
-    m = ImpactOscillator("w0**2*x", "c*y", forcing="A*cos(W*t + phi)",
-                         parameters=dict(c=0.5, w0=1.0, W=1.3, A=0.4, phi=0.0, D=0.05), barriers=None)
-    simulate_automaton(m.to_automaton(), "splitting", x0=(0.0, 0.0), observables={{"x": "x"}},
-                       histograms={{"x": (-3.0, 3.0, 60)}}, phases=8, period=m.forcing_period,
-                       **{{**small, "t_end": 11.0}})  # at least one forcing period (4.8) sampled
+run(small)
 wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+rate = None
+if {throughput!r}:  # path-steps per CPU second of a longer run, the kernel compiled above
+    c1 = time.process_time()
+    run(dict(dt=0.01, paths=64, t_end=2000.0, t_burn=0.0, seed=2, chunk_paths=8))
+    rate = 64 * 200000 / (time.process_time() - c1)
 import os, pathlib
 kernels = [f for f in pathlib.Path(os.environ["VIBRO_CACHE_DIR"]).glob("*.py")]
 print(json.dumps(dict(wall=wall, cpu=cpu, numba_wall=sum(c[1] for c in compiles),
                       numba_cpu=sum(c[2] for c in compiles), llvm_cpu=sum(llvm), functions=[c[0] for c in compiles],
-                      own=own, source_lines=sum(len(f.read_text().splitlines()) for f in kernels))))
+                      own=own, source_lines=sum(len(f.read_text().splitlines()) for f in kernels),
+                      path_steps_per_cpu_s=rate)))
 """
 
 CASES = ("example1-milstein", "impact-pair-splitting", "forced-phases")
 
 
-def cold(case: str, tree: Path = ROOT) -> dict:
-    """One cold first run of ``case`` by the source ``tree`` in a fresh process with empty kernel and numba caches."""
+def cold(case: str, tree: Path = ROOT, throughput: bool = False) -> dict:
+    """One cold first run of ``case`` by the source ``tree`` in a fresh process with empty kernel and numba caches
+    (``throughput``: then the path-steps per CPU second of 64 paths x 200,000 steps with the kernel compiled)."""
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "VIBRO_CACHE_DIR": str(Path(tmp) / "vibro"), "NUMBA_CACHE_DIR": str(Path(tmp) / "numba"),
                "PYTHONPATH": str(tree)}
-        code = _CHILD.format(tests=str(tree / "tests"), case=case)
+        code = _CHILD.format(tests=str(tree / "tests"), case=case, throughput=throughput)
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tree)
         if out.returncode:
             sys.exit(out.stderr)
@@ -128,6 +142,8 @@ def main():
     ap.add_argument("--cases", nargs="*", default=list(CASES), choices=CASES)
     ap.add_argument("--functions", action="store_true", help="also each numba function's own compile time")
     ap.add_argument("--baseline", metavar="REF", help="also compile with the tree of git revision REF, interleaved")
+    ap.add_argument("--throughput", action="store_true",
+                    help="also path-steps per CPU second of each kernel after its compile (64 x 200,000 steps)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as base:
         if args.baseline:
@@ -139,15 +155,24 @@ def main():
         for case in args.cases:
             runs, before = [], []
             for _ in range(args.reps):  # interleaved: both trees see the same load
-                runs.append(cold(case))
+                runs.append(cold(case, throughput=args.throughput))
                 if args.baseline:
-                    before.append(cold(case, Path(base)))
+                    before.append(cold(case, Path(base), throughput=args.throughput))
             if args.baseline:
                 old = _line(f"{case} ({args.baseline})", before)
             medians.append(_line(f"{case} (this tree)", runs))
             if args.baseline:
                 ratios.append(medians[-1] / old)
-                print(f"{'':34s} after / before: {ratios[-1]:.2f}")
+                print(f"{'':34s} compile after / before: {ratios[-1]:.2f}")
+            if args.throughput:  # M path-steps per CPU second, compile excluded
+                new = [r["path_steps_per_cpu_s"] / 1e6 for r in runs]
+                line = f"{'':34s} throughput {statistics.median(new):6.1f} M path-steps/cpu s"
+                if args.baseline:
+                    old = [r["path_steps_per_cpu_s"] / 1e6 for r in before]
+                    line += (f" against {statistics.median(old):6.1f} for {args.baseline}: after / before "
+                             f"{statistics.median(new) / statistics.median(old):.3f} (runs "
+                             + ", ".join(f"{a:.1f}/{b:.1f}" for a, b in zip(new, old)) + ")")
+                print(line)
             if args.functions:  # each function's own compile, without those it compiles on the way (first run)
                 own = sorted(runs[0]["own"].items(), key=lambda kv: -kv[1])
                 print(f"{'':34s} own cpu s: " + ", ".join(f"{name} {sec:.2f}" for name, sec in own if sec >= 0.05))
