@@ -81,9 +81,11 @@ _BOUNDSCHECK = textwrap.dedent("""
 """)
 
 
-def test_kernels_run_under_numba_boundscheck(tmp_path):
-    # a fresh kernel cache: numba compiles with bounds checks, so any index out of range raises IndexError
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", VIBRO_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
+def test_kernels_run_under_numba_boundscheck():
+    # numba compiles with bounds checks, so any index out of range raises IndexError; the kernels' names carry
+    # NUMBA_BOUNDSCHECK (kernel_key), so the shared kernel cache keeps them apart from the unchecked ones and a
+    # second run of the suite loads them instead of compiling them again
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", PYTHONPATH=str(ROOT))
     res = subprocess.run([sys.executable, "-c", _BOUNDSCHECK], capture_output=True, text=True, env=env, cwd=ROOT,
                          timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]

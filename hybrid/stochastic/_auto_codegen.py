@@ -1,8 +1,10 @@
 """Numba source for Monte Carlo of any :class:`~hybrid.automaton.HybridAutomaton` with noise.
 
 The automaton's sympy expressions (Itô drift, noise matrix, guards, resets, checks, observables, the guards' rates
-of change along the drift) become numba functions of ``(which, x, t, p)``, one per kind with a branch per mode or
-transition. Parameter values are not in the source (they arrive as the array ``p``), so changing a parameter never
+of change along the drift) become one numba function ``model(kind, which, x, t, p, out)`` with a branch per kind
+(only the kinds the scheme calls) and, in it, per mode or transition (numba compiles each function on its own, so one
+function for all of them compiles once, not nine times); the observables are ``_observe``. Parameter values are not
+in the source (they arrive as the array ``p``), so changing a parameter never
 recompiles. The scheme is a constant of the generated module, so only its own code is compiled. The source is
 cached on disk by its hash (:func:`kernel_key`).
 
