@@ -81,7 +81,9 @@ def against_mc(runs, D: str = "0.02"):
         cpu = time.process_time() - t0
         l1 = np.array([np.abs(s.bin_masses(edges) - r).sum() for s, r in zip(sol.sections(PHASES), ref)])
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        est = "-" if sol.error_estimate is None else f"{sol.error_estimate:.4f}"
+        est = "-" if sol.error_estimate is None else (
+            f"{sol.error_estimate:.4f}" if sol.time_estimate is None else
+            f"{sol.error_estimate:.4f} = {sol.grid_estimate:.4f} + {sol.time_estimate:.4f}")
         print(f"   {label:36s} {sol.grid.n:6d}  {sol.factors:6d}  {sol.iterations:4d}  {cpu:6.1f}  {peak:7.0f}  "
               f"{l1.mean():.4f}   {l1.max():.4f}   {est:8s}  {sol.mean_energy:.4f}  {sol.impact_rate:.4f}", flush=True)
         if base is None:
@@ -124,15 +126,17 @@ RINGS = {"cells": "rings", "grid": (120, 128), "scheme": "cn", "steps": 64, "che
 
 def main(quick: bool) -> None:
     runs = [("baseline: rings (120, 128), CN 64", RINGS),
-            ("(40, 80), CN 32 + 64", {"grid": (40, 80)}),
-            ("(60, 120), CN 32 + 64 (default)", {})]
+            ("(40, 80), CN 32 + 64", {"grid": (40, 80), "steps": 32}),
+            ("(60, 120), CN 32 + 64 (previous default)", {"grid": (60, 120), "steps": 32}),
+            ("(64, 128), CN 64 + 128 (default)", {})]
     if not quick:
-        runs += [("(60, 120), CN 64 alone", {"scheme": "cn", "steps": 64}),
-                 ("(60, 120), CN 16 + 32", {"steps": 16}),
-                 ("(80, 160), CN 32 + 64", {"grid": (80, 160)})]
+        runs += [("(60, 120), CN 64 alone", {"grid": (60, 120), "scheme": "cn", "steps": 64}),
+                 ("(60, 120), CN 16 + 32", {"grid": (60, 120), "steps": 16}),
+                 ("(60, 120), CN 64 + 128", {"grid": (60, 120), "steps": 64}),
+                 ("(80, 160), CN 32 + 64", {"grid": (80, 160), "steps": 32})]
     against_mc(runs, "0.02")
     if not quick:
-        against_mc(runs[:3], "0.05")
+        against_mc(runs[:4], "0.05")
     lin = [("rings (120, 128), CN 64", {**RINGS, "grid": (120, 128)}),
            ("(32, 32), CN 64 alone", {"grid": (32, 32), "scheme": "cn", "steps": 64, "check": False}),
            ("(32, 32), CN 16 + 32", {"grid": (32, 32), "steps": 16}),
@@ -140,7 +144,7 @@ def main(quick: bool) -> None:
            ("(64, 64), CN 32 + 64", {"grid": (64, 64), "steps": 32})]
     if not quick:
         lin += [("(32, 32), CN 64 + 128", {"grid": (32, 32), "steps": 64}),
-                ("(60, 120), CN 32 + 64", {"grid": (60, 120)})]
+                ("(60, 120), CN 32 + 64", {"grid": (60, 120), "steps": 32})]
     linear(lin if not quick else lin[1:4])
 
 

@@ -51,6 +51,79 @@ def test_the_walker_sees_function_local_imports(tmp_path):
     assert sorted(t for _, t in _imported_packages(f, "hybrid")) == ["averaging", "vibro"]
 
 
+def _module_imports(package_dir: Path, dotted: str) -> dict:
+    """{module: set of sibling modules it imports} inside one package, function-local imports included
+    (``from . import a, b``, ``from .a import x``, ``import pkg.a``, ``from pkg.a import x``)."""
+    names = {p.stem for p in package_dir.glob("*.py") if p.stem != "__init__"}
+    graph = {}
+    for name in names:
+        tree = ast.parse((package_dir / f"{name}.py").read_text(encoding="utf-8"))
+        out = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level == 1:
+                    targets = [base.split(".")[0]] if base else [a.name for a in node.names]
+                elif node.level == 0 and base.startswith(dotted + "."):
+                    targets = [base[len(dotted) + 1:].split(".")[0]]
+                else:
+                    targets = []
+            elif isinstance(node, ast.Import):
+                targets = [a.name[len(dotted) + 1:].split(".")[0] for a in node.names
+                           if a.name.startswith(dotted + ".")]
+            else:
+                continue
+            out |= {t for t in targets if t in names and t != name}
+        graph[name] = out
+    return graph
+
+
+def _cycle(graph: dict) -> list | None:
+    """One import cycle of ``graph`` as a list of modules (first = last), or None."""
+    state: dict = {}
+    stack: list = []
+
+    def visit(node):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        state[node] = 2
+        stack.pop()
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_the_stochastic_engine_has_no_import_cycle():
+    """hybrid/stochastic imports in one direction: no module reaches itself through its imports (function-local
+    ones included), so each piece (code generator, executor, runners, front ends) stands on the ones below."""
+    graph = _module_imports(ROOT / "hybrid" / "stochastic", "hybrid.stochastic")
+    assert {"_auto_exec", "_runner", "_auto_runner", "_front"} <= set(graph)
+    assert _cycle(graph) is None, " -> ".join(_cycle(graph))
+
+
+def test_the_cycle_finder_sees_a_function_local_cycle(tmp_path):
+    (tmp_path / "a.py").write_text("from . import b\n")
+    (tmp_path / "b.py").write_text("def f():\n    from .c import x\n")
+    (tmp_path / "c.py").write_text("import pkg.a\n")
+    graph = _module_imports(tmp_path, "pkg")
+    assert graph == {"a": {"b"}, "b": {"c"}, "c": {"a"}}
+    assert _cycle(graph) == ["a", "b", "c", "a"]
+    (tmp_path / "c.py").write_text("import pkg\n")
+    assert _cycle(_module_imports(tmp_path, "pkg")) is None
+
+
 def test_cli_names_match_the_registries():
     from averaging import METHODS
     from hybrid.stochastic import SCHEMES

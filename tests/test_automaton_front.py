@@ -56,6 +56,20 @@ def test_a_failed_transition_check_is_counted_and_reported():
     assert simulate_automaton(base, "symplectic", **kw).flags["bad_reset"] == 0
 
 
+def test_two_entry_points_give_the_same_numbers_for_one_seed():
+    """simulate_ensemble(model, 'milstein') and simulate_automaton(model.to_automaton(), 'symplectic') are one engine:
+    the same seed and chunks give the same energy sums of every chunk and the same impacts, to the bit (the kernels
+    are those of the test above and of the oscillator ensembles)."""
+    model = DuffingImpact(restitution=Newton(0.9))
+    kw = dict(dt=2e-3, paths=8, t_end=100.0, t_burn=10.0, seed=5, chunk_paths=1)
+    osc = simulate_ensemble(model, "milstein", xy_bins=None, **kw)
+    auto = simulate_automaton(model.to_automaton(), "symplectic", x0=(0.0, 0.0), histograms={"H": None}, **kw)
+    order = np.argsort(osc.chunk_ids)
+    np.testing.assert_array_equal(osc.chunk_sums[order, 0], auto.chunk_sums[:, 0])
+    assert osc.impacts == int(auto.events.sum()) > 0
+    assert osc.mean_energy.value == auto.mean("H").value
+
+
 @SLOW  # two kernels
 def test_summed_observables_have_means_but_no_histogram():
     a = DuffingImpact().to_automaton()

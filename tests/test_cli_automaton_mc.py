@@ -106,6 +106,32 @@ def test_event_logs_from_the_command_line(tmp, capsys):
         assert rec["paths"] == len(firsts) and rec["mean"] == pytest.approx(firsts.mean(), rel=1e-12)
 
 
+def test_oscillator_and_automaton_routes_write_the_same_files(tmp_path, capsys):
+    """One writer (vibro/cli/mc_outputs.py): an oscillator run and an automaton run write the same files, columns,
+    sidecars and result keys (the impact pair's kernel of the test above; Example 1's milstein kernel)."""
+    common = ["--dt", "0.01", "--paths", "4", "--t-end", "10", "--t-burn", "1", "--seed", "2"]
+    runs = {"osc": ["--model", "duffing", "--scheme", "milstein"],
+            "pair": ["--model", "impact_pair", "--scheme", "splitting", "--range", "z=-0.2:0.2:20"]}
+    keys = {}
+    for name, argv in runs.items():
+        d = tmp_path / name
+        d.mkdir()
+        assert _run(["mc", *argv, *common, "--out", d / "h.csv", "--summary-json", d / "s.json"]) == 0, \
+            capsys.readouterr().err
+        files = {p.name for p in d.iterdir()} - {"h_z.csv", "h_z.json"}  # the pair's extra observable
+        assert files == {"h.csv", "h.json", "h_transitions.csv", "h_transitions.json", "s.json"}, files
+        assert list(pd.read_csv(d / "h.csv").columns) == ["H_lo", "H_hi", "count", "density"]
+        tr = pd.read_csv(d / "h_transitions.csv")
+        assert list(tr.columns) == ["transition", "firings", "rate"] and tr["firings"].sum() > 0
+        assert json.loads((d / "h_transitions.json").read_text())["output"] == "transitions"
+        rec = json.loads((d / "s.json").read_text())
+        assert rec == json.loads((d / "h.json").read_text())
+        assert rec["results"]["firings"] == dict(zip(tr["transition"], tr["firings"]))
+        keys[name] = set(rec["results"])
+    shared = {"paths", "samples", "wall_time", "observables", "rates", "firings", "counters", "mean_energy"}
+    assert shared <= keys["osc"] and shared <= keys["pair"]
+
+
 def test_a_user_oscillator_with_an_ou_filter_meets_the_closed_form_response(tmp, capsys):
     out, summary = tmp / "h.csv", tmp / "s.json"
     alpha, dt = 2.0, 0.01

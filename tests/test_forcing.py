@@ -263,6 +263,15 @@ def test_vibro_mc_writes_phase_resolved_histograms(tmp_path):
     side = json.loads((tmp_path / "h_phases.json").read_text())  # its own provenance sidecar
     assert side["output"] == "phases" and side["settings"]["phases"] == 4 and side["model"]["forcing"]
     assert not list(tmp_path.glob("*.tmp*"))  # written atomically: no temporary left
+    tr = pd.read_csv(tmp_path / "h_transitions.csv")  # the walls' firings, as on every route of vibro mc
+    assert list(tr.columns) == ["transition", "firings", "rate"] and set(tr.transition) == {"left", "right"}
+    # a forced model takes checkpoints: a checkpointed run and its resume write the bytes of the plain run
+    from vibro.cli import main
+
+    ck = ["--checkpoint", str(tmp_path / "ck")]
+    for name, extra in (("ck.csv", ck), ("resumed.csv", [*ck, "--resume"])):
+        assert main([*cmd[3:-4], "--out", str(tmp_path / name), *extra]) == 0
+        assert (tmp_path / name).read_bytes() == out.read_bytes()
     for bad, words in ((["--param", "Omega=0"], "frequency"), (["--param", "A=nan"], "not finite")):
         res = subprocess.run([*cmd[:4], "--model", "duffing-forced", *bad, "--out", str(out)], capture_output=True,
                              text=True, env=env, timeout=120)

@@ -96,8 +96,14 @@ def _parts(model, params):
         raise ModelError(f"the coloured-noise solver takes a model built by models.excitation.ou_filter, got "
                          f"{type(model).__name__}")
     if model.filter.get("kind") != "ou":
+        # a 4-D grid at this solver's default resolution, (48, 48) cells by 32 x 32 levels, at BYTES_PER_CELL
+        cells = COLOURED_GRID[0] * COLOURED_GRID[1] * COLOURED_GRID[2] ** 2
         raise ModelError(f"the coloured-noise solver handles the OU filter (state (x, y, eta)); a "
-                         f"{model.filter.get('kind')} filter adds two states (a 4-D density): use Monte Carlo")
+                         f"{model.filter.get('kind')} filter adds two states, so its density is 4-D, on "
+                         f"{tuple(s.name for s in model.states)}: {COLOURED_GRID[0]} x {COLOURED_GRID[1]} cells by "
+                         f"{COLOURED_GRID[2]} x {COLOURED_GRID[2]} filter levels ({cells:.2g} cells) would need about "
+                         f"{cells * BYTES_PER_CELL / 1e9:.0f} GB, and no 4-D solver is built: use Monte Carlo "
+                         "(vibro mc on the filtered automaton, hybrid.stochastic.simulate_automaton)")
     if model.oscillator is None or model.filter.get("noises") != 1:
         raise ModelError("the coloured-noise solver needs an ImpactOscillator with one noise under the OU filter")
     values = model.resolve_parameters(params)
@@ -479,6 +485,7 @@ def stationary_density_coloured(model, grid=None, h_max: float = 4.0, *, params=
         coarse = solve_coloured(model, coarse_grid, h, params=params, walls=walls, points=3, start=sd,
                                 max_memory=max_memory)
     sd._coarse_solve, sd._estimate_order = coarse, float(order)  # estimate_error on other bins
+    sd.tail_mass = tail
     est = sd.estimate_error(np.linspace(sd.h_min, sd.h_support, 101)) + tail
     sd.error_estimate = est
     sd.error_method = (f"two grids: L1(p on {(nx, ny, nz)}, p on {coarse_grid}) / (2**{order:g} - 1) (Richardson) "

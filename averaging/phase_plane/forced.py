@@ -40,17 +40,19 @@ and their coupling makes the blocks dense. The period map needs one sparse LU pe
 once and reused by every GMRES iteration; a forcing A cos(Omega t + phi) takes each value twice per period, so
 about K/2 factors are computed per run (the matrices are keyed by the drift they hold).
 
-Error estimate. With ``check`` (default) the same problem is solved on the grid twice coarser, and the L1 of
-p(H | t) between the two, over 3 (order 2, conservative), is ``error_estimate``; a :class:`GridWarning` says when it
-exceeds ``l1_tol``. Both grids take the same steps, so this is the error of the cells alone: it does not see the
-time error. ``time_correction`` is the size of the time extrapolation, i.e. the time error of the 2K-step
-Crank-Nicolson run (L1 of the cell densities): an upper bound on the time error of the combination, which is
-reported but not checked against ``l1_tol``; ``scheme="cn"`` and ``"bdf2"`` carry no time error estimate at all.
+Error estimate. With ``check`` (default), ``error_estimate`` = ``grid_estimate`` + ``time_estimate`` (L1 of
+p(H | t) on 100 bins, worst phase), and a :class:`GridWarning` names the larger part when the sum exceeds ``l1_tol``.
+The cells' part: the same problem solved on the grid twice coarser (same steps), the L1 between the two over 3
+(order 2, conservative). The time steps' part: on that coarser grid, the same scheme at half the steps, the L1
+between the results at K and K/2 over 3 (order 2 assumed for a combination whose observed order is 2.9-3.8: it
+bounded the time error by 1.1-6 times on example 08 and the linear oscillator, docs/results/fpk-forced.md); the
+cells' error cancels in that difference. ``time_correction`` (the L1 of the cell densities between Crank-Nicolson
+alone at 2K steps and the combination) is still reported.
 
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): on example 08 (D = 0.02) the L1 of p(H | t)
-against converged Monte Carlo (noise 0.0022) is 0.0031 mean and 0.0050 worst over 16 phases at the default grid
-(60, 120) with 32 + 64 steps, in 19-22 s CPU and 1.3 GB; the linear oscillator's section means and variances are
-within 2e-5 and 4.5e-4 of the closed form.
+against converged Monte Carlo (noise 0.0022) is 0.0028 mean and 0.0045 worst over 16 phases at the default grid
+(64, 128) with 64 + 128 steps (estimate 0.0045), in 45-47 s CPU and 2.6 GB; the linear oscillator's section means
+and variances are within 2.3e-6 and 3.5e-5 of the closed form at 64 + 128 steps.
 
 Outputs (:class:`PeriodicDensity`): the density at any time of the period (``section(t)``, a
 :class:`~averaging.phase_plane.PhaseDensity` with p(H | t), p(x, y | t), marginals and impacts; between the K
@@ -89,15 +91,18 @@ from ._grid import RingGrid
 from .cartesian import CartesianDensity, moments
 from .solver import DEFAULT_STRETCH, GridWarning, PhaseDensity, _coefficients, _walls, grid_pair
 
-FORCED_GRID = (60, 120)
-"""Default (cells in x, cells in y) of the forced solver on Cartesian cells (``benchmarks/fpk_forced.py``)."""
+FORCED_GRID = (64, 128)
+"""Default (cells in x, cells in y) of the forced solver on Cartesian cells: with :data:`DEFAULT_STEPS`, the finest
+that keeps example 08 (D = 0.02) within the default ``l1_tol`` of 0.005 with both parts of the estimate (cells
+0.0039, time steps 0.0006; at (60, 120) 0.0045 + 0.0006 = 0.0050 just missed it; docs/results/fpk-forced.md)."""
 FORCED_RING_GRID = (120, 128)
 """Default (rings, angles) with ``cells="rings"``."""
 PHASE_ORDER = 3
 """Order of the convection along the rings (3: upwind-biased kappa = 1/3, as the autonomous solver)."""
-DEFAULT_STEPS = 32
+DEFAULT_STEPS = 64
 """Default time steps per forcing period of the result (``scheme="richardson"`` also runs twice as many; rounded up
-to a multiple of the phases asked for)."""
+to a multiple of the phases asked for). 64: the time estimate of example 08 is 0.0006 (measured time error 0.00016);
+at 32 it is 0.0045 (measured 0.0022), which with the cells' estimate would miss the default ``l1_tol``."""
 SCHEMES = ("richardson", "cn", "bdf2")
 """Time integrations: Crank-Nicolson at K and 2K steps combined (fourth order), Crank-Nicolson, BDF2."""
 CUT_TAIL = 1e-6
@@ -143,8 +148,11 @@ class PeriodicDensity:
     cells : str
         ``"cartesian"`` or ``"rings"``.
     error_estimate : float or None
-        Estimated L1 error of p(H | t) on 100 bins (the largest over the phases), from the solve on the grid twice
-        coarser with the same steps (``check=True``): the error of the cells only, not of the time steps.
+        Estimated L1 error of p(H | t) on 100 bins (the largest over the phases), ``grid_estimate`` +
+        ``time_estimate`` (``check=True``).
+    grid_estimate, time_estimate : float or None
+        The cells' part (the solve on the grid twice coarser, same steps) and the time steps' part (on that grid,
+        the same scheme at half the steps); :meth:`estimate_parts` gives them on other bins or phases.
     time_correction : float or None
         max over the stored times of the L1 (cell densities) between the 2K-step run and the extrapolated density
         (``scheme="richardson"``; None otherwise): the time error of Crank-Nicolson alone at 2K steps, an upper
@@ -191,7 +199,10 @@ class PeriodicDensity:
         self.iterations = 0
         self.factors = 0
         self.error_estimate = None
+        self.grid_estimate = None
+        self.time_estimate = None
         self.time_correction = None
+        self._check = None
 
     # ------------------------------------------------------------------ sections
     def _section(self, p, k):
@@ -283,12 +294,55 @@ class PeriodicDensity:
                                             "density": d}))
         return pd.concat(frames, ignore_index=True)
 
+    def estimate_parts(self, edges, phases: int | None = None, average: bool = False):
+        """(grid, time) estimates of the L1 error of p(H | t) on the energy bins ``edges``, worst over ``phases``
+        sections k T / phases (default: those of the check), or of the time-averaged p(H) with ``average``.
+
+        grid: the L1 between this solve and the check's on the grid twice coarser (same steps), over 3 (order 2:
+        conservative, the Cartesian cells converge at order 2 next to an inelastic wall and faster elsewhere).
+        time: on the check's grid, the L1 between the result at the steps K and the same scheme at K / 2, over 3
+        (order 2 assumed: the Richardson combination's order rises from 2 to 4 as the steps shrink, so this
+        overestimates, 2-6 times in docs/results/fpk-forced.md); its cells' error cancels in the difference.
+        Needs ``check=True`` (else :class:`~hybrid.errors.ParameterError`).
+
+        Examples
+        --------
+        >>> from models import ForcedDuffingImpact
+        >>> pd_ = periodic_density_xy(ForcedDuffingImpact(), grid=(24, 48), steps=8, l1_tol=1.0)
+        >>> grid, time = pd_.estimate_parts(np.linspace(0.0, 2.0, 41), average=True)
+        >>> bool(0 < grid < 1 and 0 < time < 1)
+        True
+        """
+        check = getattr(self, "_check", None)
+        if check is None:
+            raise ParameterError("no error estimate: the density was solved with check=False")
+        coarse, half, default = check
+        edges = np.asarray(edges, dtype=float)
+
+        def gap(a, b, k, pick=None):
+            if average:
+                return float(np.abs(a.mean.bin_masses(edges) - b.mean.bin_masses(edges)).sum())
+            times = a.phase_times(k) if pick is None else pick
+            return max(float(np.abs(a.section(t).bin_masses(edges) - b.section(t).bin_masses(edges)).sum())
+                       for t in times)
+
+        k = default if phases is None else _count("phases", phases)
+        grid = gap(self, coarse, k) / 3.0
+        if half is None:
+            return grid, None
+        # the times both runs store: the half run's steps that are also sections asked for (or 8 of them)
+        common = int(np.gcd(len(half.times), k))
+        if common < min(k, 4):
+            common = min(8, len(half.times))
+        return grid, gap(coarse, half, common, half.phase_times(common)) / 3.0
+
     def metadata(self) -> dict:
         """Method, model, grid, period and summary statistics (JSON-friendly)."""
         return {**self.mean.metadata(), "period": self.period, "steps": len(self.times),
                 "mean_energy": self.mean_energy, "impact_rate": self.impact_rate, "periodicity": self.periodicity,
                 "conservation": self.conservation, "gmres_iterations": self.iterations, "factors": self.factors,
-                "cells": self.cells, "error_estimate": self.error_estimate, "time_correction": self.time_correction}
+                "cells": self.cells, "error_estimate": self.error_estimate, "grid_estimate": self.grid_estimate,
+                "time_estimate": self.time_estimate, "time_correction": self.time_correction}
 
     def __repr__(self) -> str:
         return (f"PeriodicDensity(model={self.model.name!r}, method='fpk', cells={self.grid.n}, "
@@ -478,7 +532,8 @@ class ExtrapolatedPeriodicDensity(PeriodicDensity):
         self.factors = fine.factors + coarse.factors
         self.timing = {k: fine.timing[k] + coarse.timing[k] for k in fine.timing}
         self.cells, self._plane = fine.cells, fine._plane
-        self.error_estimate = None
+        self.error_estimate = self.grid_estimate = self.time_estimate = None
+        self._check = None
         self.time_correction = fine.time_correction
 
     def cells_at(self, t):
@@ -557,10 +612,10 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         fourth order, the time error of a section's moments falls from 8e-3 to 5e-4 on the linear oscillator),
         Crank-Nicolson alone, or BDF2 (L-stable, larger error).
     check : bool
-        Also solve on the grid twice coarser (same steps) and estimate the L1 error of p(H | t) on 100 bins due to
-        the cells (not the time steps: see ``time_correction``) from the two (``error_estimate``, order 2 assumed:
-        conservative, the Cartesian scheme converges at order 2 next to an inelastic wall and faster elsewhere);
-        warn (:class:`GridWarning`) when it exceeds ``l1_tol``.
+        Also solve on the grid twice coarser (same steps, and again at half the steps) and estimate the L1 error of
+        p(H | t) on 100 bins: the cells' part from the two grids and the time steps' part from the two step counts
+        (``error_estimate`` = ``grid_estimate`` + ``time_estimate``, order 2 assumed for both: conservative);
+        warn (:class:`GridWarning`) when it exceeds ``l1_tol``. Makes ``steps`` even (at least 8).
     l1_tol : float
         The L1 error of p(H | t) above which ``check`` warns.
     extrapolate : bool
@@ -612,11 +667,16 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     plane_of, default, axes, least = PLANES[cells]
     n1, n2 = grid_pair(default if grid is None else grid, axes, least)
     steps = _count("steps", steps)
+    unit = 1
     if phases is not None:
         phases = _count("phases", phases)
-        steps = phases * -(-steps // phases)
-    if steps < 4:
-        raise ParameterError(f"steps={steps} must be at least 4 per period")
+        unit = phases
+    if check and unit % 2:
+        unit *= 2  # the time estimate runs at half the steps
+    steps = unit * -(-steps // unit)
+    if steps < (8 if check else 4):
+        raise ParameterError(f"steps={steps} must be at least {8 if check else 4} per period"
+                             + (" (the check's time estimate runs at half the steps)" if check else ""))
     if int(points) != points or points < 3:
         raise ParameterError(f"points={points!r} must be an integer >= 3")
     if scheme not in SCHEMES:
@@ -641,7 +701,7 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     left, right = _walls(model, walls)
     drift = lambdify_numeric((X, Y, T), model.substitute(model.ito_drift))
 
-    def solve_on(h, n1, n2):
+    def solve_on(h, n1, n2, probe=False):
         t0 = time.perf_counter()
         plane = plane_of(model, free, law, h, n1, n2, left, right)
         fine = 2 * steps if scheme == "richardson" else steps
@@ -679,6 +739,20 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         if scheme == "richardson":
             w = plane.mass_weight
             out.time_correction = float(np.max(np.abs(runs[1][0][::2] - snapshots) @ w))
+        if probe:
+            # the same scheme at half the steps, for the time error: Richardson takes Crank-Nicolson at K / 2 with
+            # the K run it already has; a single scheme runs again at K / 2
+            half = steps // 2
+            if scheme == "richardson":
+                slow = _fixed_point(plane, operators[::4], drifts[::4], 4 * dt, "cn", runs[0][0][0], tol,
+                                    max_iterations)
+                probe_p = (4.0 * runs[0][0][::2] - slow[0]) / 3.0
+            else:
+                slow = _fixed_point(plane, operators[::2], drifts[::2], 2 * dt, scheme, snapshots[0], tol,
+                                    max_iterations)
+                probe_p = slow[0]
+            out.half_steps = PeriodicDensity(model, plane, period * np.arange(half) / half, period, probe_p,
+                                             operators[::len(operators) // half], points, h_max)
         return out
 
     # the cells on the energies the unforced density reaches (e**-40 below its peak), doubled for the forcing's
@@ -712,21 +786,25 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
     if not (check or extrapolate):
         return out
     lo1, lo2 = max(least[0], n1 // 2), max(least[1], n2 // 2)
-    coarse = solve_on(h, lo1, lo2)
-    # the L1 of p(H | t) between the grids, at the phases asked for (8 without), on 100 bins of the energy range
-    k = phases or 8
+    coarse = solve_on(h, lo1, lo2, probe=check)
+    out._check = (coarse, getattr(coarse, "half_steps", None), phases or 8)
+    # the L1 of p(H | t) at the phases asked for (8 without), on 100 bins of the energy range
     edges = np.linspace(out.mean.h_min, out.grid.h_max, 101)
-    gap = max(float(np.abs(a.bin_masses(edges) - b.bin_masses(edges)).sum())
-              for a, b in zip(out.sections(k), coarse.sections(k)))
-    estimate = gap / 3.0
+    parts = out.estimate_parts(edges)
     if extrapolate:
         out = ExtrapolatedPeriodicDensity(out, coarse)
+        out._check = None  # the estimate is the fine grid's (the extrapolation is not estimated on its own)
+    out.grid_estimate, out.time_estimate = parts
+    estimate = parts[0] + (parts[1] or 0.0)
     out.error_estimate = estimate
     out.mean.error_estimate = estimate
     if check and estimate > l1_tol:
-        warnings.warn(f"grid {(n1, n2)} too coarse: estimated L1 error of p(H | t) {estimate:.2g} > "
-                      f"l1_tol={l1_tol:g} (from the solve on the grid {(lo1, lo2)}); refine the grid",
-                      GridWarning, stacklevel=2)
+        space = parts[0] >= (parts[1] or 0.0)
+        what, fix = ((f"grid {(n1, n2)}", "refine the grid") if space else
+                     (f"time step (T / {steps})", "raise steps"))
+        timed = "" if parts[1] is None else f", time steps {parts[1]:.2g} from a run at {steps // 2} steps"
+        warnings.warn(f"{what} too coarse: estimated L1 error of p(H | t) {estimate:.2g} > l1_tol={l1_tol:g} (cells "
+                      f"{parts[0]:.2g} from the solve on {(lo1, lo2)}{timed}); {fix}", GridWarning, stacklevel=2)
     return out
 
 

@@ -24,9 +24,11 @@ How it works:
   are ratios of ``math.fsum`` sums with batch-means (per-chunk) 95 % intervals.
 * ``_problem``: :class:`EnsembleProblem` (what), :class:`MonteCarloAlgorithm` (how) and :class:`Execution`
   (where, how much), the argument groups of :func:`solve_ensemble`; :func:`simulate_ensemble` takes them flat.
-* ``_runner``: chunks of paths run on ``numba.get_num_threads()`` threads (a ``nogil`` kernel; each call interleaves
-  8 paths so that their dependency chains overlap) or on Dask; checkpoints and resume. :func:`sample_paths` stores
-  the very paths of the ensemble with the same seed; :func:`drive_paths` feeds given normals.
+* ``_auto_exec``: the one executor of every ensemble: chunks of paths on threads (a ``nogil`` kernel) or on Dask,
+  the one checksummed checkpoint format (also the CUDA scheduler's), resume.
+* ``_runner``: the oscillator front end (settings, step rule, result checks) of the automaton job;
+  ``_auto_runner``: ``simulate_automaton`` and ``drive_automaton``. :func:`sample_paths` stores the very paths of
+  the ensemble with the same seed; :func:`drive_paths` feeds given normals.
 * ``_auto_cuda`` / ``_cuda_rng``: ``scheduler="cuda"`` for automata and oscillators alike (an oscillator runs its
   automaton: ``_front.run_on_cuda``), the automaton generator's step code as numba-cuda device functions (one
   thread per path, Philox-4x32-10 normals, block-shared histograms, launches with checkpoints); docs/gpu.md.
@@ -38,21 +40,12 @@ Examples
 ['em', 'milstein', 'naive', 'splitting']
 """
 
+from ._auto_exec import default_chunk_paths
 from ._front import Kernel, build_kernel, generate_source
 from ._kernel_modules import cache_dir
-from ._problem import EnsembleProblem, Execution, MonteCarloAlgorithm
+from ._problem import ChatteringWarning, EnsembleProblem, Execution, MonteCarloAlgorithm, StepSizeWarning
 from ._rng import chunk_states, normals, ziggurat_tables
-from ._runner import (
-    ChatteringWarning,
-    StepSizeWarning,
-    check_step,
-    default_chunk_paths,
-    drive_paths,
-    sample_paths,
-    simulate_ensemble,
-    solve_ensemble,
-    speed_scale,
-)
+from ._runner import check_step, drive_paths, sample_paths, simulate_ensemble, solve_ensemble, speed_scale
 from ._schemes import SCHEMES, EulerMaruyama, Milstein, NaiveFlip, Scheme, Splitting, get_scheme
 from ._statistics import EnsembleStatistics, Estimate, atomic_write_text, ratio_estimate
 

@@ -23,16 +23,10 @@ from hybrid.errors import ModelError, ParameterError
 from hybrid.sizes import check_limit, check_size
 
 from . import _auto_codegen, _auto_exec, _rng
-from ._auto_exec import COUNT_NAMES
+from ._auto_exec import COUNT_NAMES, check_chunk_count, default_chunk_paths
 from ._kernel_modules import load_source
-from ._runner import (
-    CHATTER_IMPACTS_PER_STEP,
-    MAX_PATH_STEPS,
-    ChatteringWarning,
-    check_chunk_count,
-    default_chunk_paths,
-)
-from ._statistics import Estimate, ratio_estimate
+from ._problem import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, StepSizeWarning, positive_int
+from ._statistics import Estimate, joint_frame, ratio_estimate
 
 
 @dataclass(frozen=True)
@@ -346,6 +340,14 @@ class AutomatonEnsemble:
         dens = np.concatenate([[np.nan], d, [np.nan]])
         return pd.DataFrame({"lo": lo, "hi": hi, "count": c, "density": dens})
 
+    def joint_to_pandas(self):
+        """The joint histogram in long form, as :meth:`EnsembleStatistics.joint_to_pandas` writes it: x_lo, x_hi,
+        y_lo, y_hi, count, density (normalised by all samples), and a last row counting the samples outside it."""
+        if self.joint is None:
+            raise ParameterError("no joint histogram was collected: pass joint=(name_x, name_y, ...)")
+        _, _, xe, ye, counts = self.joint
+        return joint_frame(xe, ye, counts, self.flags["joint_outside"], self.flags["samples"])
+
     def __repr__(self) -> str:
         means = ", ".join(f"E[{nm}]={self.mean(nm)}" for nm in self.names[:3])
         more = f", ... {len(self.names) - 3} more" if len(self.names) > 3 else ""
@@ -455,12 +457,6 @@ def _as_count(name, value, meaning):
     return int(value)
 
 
-def _as_int(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ParameterError(f"{name}={value!r} must be a positive integer")
-    return int(value)
-
-
 def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, t_end: float, x0,
                        t_burn: float = 0.0, mode0: str | None = None, params: dict | None = None, seed: int,
                        observables: dict | None = None, histograms: dict | None = None, joint=None,
@@ -512,7 +508,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Statistics every ``stride`` steps.
     chunk_paths : int, optional
         Paths per chunk. The same seed and chunk size give the same numbers on any number of threads. Default:
-        chosen from the paths and the steps by :func:`~hybrid.stochastic._runner.default_chunk_paths` (8 for few
+        chosen from the paths and the steps by :func:`~hybrid.stochastic.default_chunk_paths` (8 for few
         long paths, larger for many short ones) and recorded as ``settings["chunk_paths"]``.
     threads : int, optional
         Worker threads (default: the CPU count).
@@ -573,12 +569,12 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     t_burn = _as_float("t_burn", t_burn, positive=False)
     if not 0.0 <= t_burn < t_end:
         raise ParameterError(f"t_burn={t_burn!r} must lie in [0, t_end={t_end!r}) so that something is sampled")
-    paths = _as_int("paths", paths)
-    stride = _as_int("stride", stride)
+    paths = positive_int("paths", paths)
+    stride = positive_int("stride", stride)
     # one chunk holds every path when chunk_paths >= paths: same numbers, no arrays sized for absent paths
     chunk_paths = min(default_chunk_paths(paths, t_end / dt) if chunk_paths is None
-                      else _as_int("chunk_paths", chunk_paths), paths)
-    checkpoint_every = _as_int("checkpoint_every", checkpoint_every)
+                      else positive_int("chunk_paths", chunk_paths), paths)
+    checkpoint_every = positive_int("checkpoint_every", checkpoint_every)
     dt_requested, phase_steps = dt, 1
     phases = _as_count("phases", phases, "0: no phase sections")
     if phases:
@@ -683,8 +679,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
 
     n_chunks = -(-paths // chunk_paths)
     states = _rng.chunk_states(seed, n_chunks)
-    npaths = np.full(n_chunks, chunk_paths, dtype=np.int64)
-    npaths[-1] = paths - chunk_paths * (n_chunks - 1)
+    npaths = _auto_exec.chunk_sizes(paths, chunk_paths)
     n_obs = max(len(names), 1)
     width = max(bins) + 2 if bins else 3
     n_tr = len(st.transitions)
@@ -696,7 +691,7 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 j_bins=j_bins, v_scale=int(v_bins) / float(v_hi), v_bins=int(v_bins), phases=phases,
                 phase_steps=phase_steps)
     job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
-    rows = {k: np.zeros((n_chunks, *shape), dtype=dtype) for k, (shape, dtype, _) in shapes.items()}
+    rows = job.zero_rows(n_chunks)
     device = None
     if scheduler == "cuda":  # the same generated step code on the GPU, one thread per path
         from . import _auto_cuda
@@ -728,26 +723,17 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
     elif ckdir is not None and resume:
         loaded = _auto_exec.load(ckdir, run_id, rows)
         done = loaded if loaded is not None else done
-    since = 0
 
     def accept(k, out):
-        nonlocal since
         for key, arr in out.items():
             rows[key][k] = arr
         done[k] = True
-        since += 1
-        if ckdir is not None and since >= checkpoint_every:
-            _auto_exec.write(ckdir, run_id, done, rows)
-            since = 0
 
-    pending = [k for k in range(n_chunks) if not done[k]] if device is None else []
-    try:
-        if pending:
-            _auto_exec.execute(job, pending, states, accept, threads=threads or os.cpu_count() or 1,
-                               scheduler=scheduler)
-    finally:
-        if ckdir is not None and since:  # keep every finished chunk, also on an interrupt
-            _auto_exec.write(ckdir, run_id, done, rows)
+    if device is None:
+        _auto_exec.run_chunks(job, [k for k in range(n_chunks) if not done[k]], states, accept,
+                              threads=threads or os.cpu_count() or 1, scheduler=scheduler, module=module,
+                              save=(lambda: _auto_exec.write(ckdir, run_id, done, rows)) if ckdir is not None else None,
+                              checkpoint_every=checkpoint_every)
     hist, vhist, counts, sums, events = rows["hist"], rows["vhist"], rows["counts"], rows["sums"], rows["events"]
     jhist = rows["jhist"] if joint is not None else None
     phist, psums, pcount = rows["phist"], rows["psums"], rows["pcount"]
@@ -831,8 +817,6 @@ def guard_step_rule(gstat: np.ndarray, names, dt: float, *, refuse: bool, warn: 
     0.0002
     """
     from hybrid.errors import StepSizeError
-
-    from ._runner import StepSizeWarning
 
     out, worst, worst_ratio = {}, None, 0.0
     for j, name in enumerate(names):

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import time
 from pathlib import Path
 
@@ -145,7 +144,7 @@ def build_kernel(model, scheme, cache: bool = True, warm: bool = True) -> Kernel
     if warm:  # the smallest run: one path, one step
         s = dict(n_chunks=1, chunk_paths=1, paths=1, xy_bins=None, xy_range=None, bins=1, v_bins=1, n_burn=0,
                  n_samp=1, stride=1, dt=1e-3, x0=[0.0, 0.0], seed=0)
-        kern, _ = build(model, s, 1.0, 1.0, (1.0, 1.0), sch.name)
+        kern = compile_job(*plan(model, s, 1.0, 1.0, (1.0, 1.0), sch.name))
         module, identity = kern.module, kern.identity
     else:
         module, _ = kernel_module(model, sch.name)
@@ -163,10 +162,9 @@ class AutomatonKernel:
 
 
 class AutomatonChunks:
-    """Runs chunks of an oscillator ensemble on the automaton kernel and returns them as oscillator rows.
+    """An oscillator ensemble's automaton job and the conversion of its chunks' statistics into oscillator rows.
 
-    Picklable (for Dask): the automaton job (its kernel source and arguments) and the restitution law, which gives
-    e at the first impact whose coefficient fell outside (0, 1].
+    The restitution law gives e at the first impact whose coefficient fell outside (0, 1].
     """
 
     def __init__(self, job: _auto_exec.AutomatonJob, settings: dict, law, transitions: tuple):
@@ -177,13 +175,6 @@ class AutomatonChunks:
         self.xy_bins = settings["xy_bins"]
         self.left = transitions.index("left") if "left" in transitions else -1
         self.right = transitions.index("right") if "right" in transitions else -1
-
-    def run(self, ids, states, module=None):
-        """Run chunks ``ids`` (with their RNG ``states``); the per-chunk arrays of :class:`EnsembleStatistics`."""
-        if module is None:
-            module = self.job.module()
-        outs = [self.job.run(int(k), np.array(states[i], dtype=np.uint64), module=module) for i, k in enumerate(ids)]
-        return self.rows(ids, outs)
 
     def rows(self, ids, outs):
         """The automaton kernel's per-chunk outputs ``outs`` (dicts of its arrays) of chunks ``ids`` as the
@@ -219,20 +210,11 @@ class AutomatonChunks:
         return ids, self.job.npaths[ids], hist, xyh, vh, cnt, sm
 
 
-def build(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple, scheme: str = "milstein") -> tuple:
-    """Generate and compile the automaton kernel of ``model`` for the run ``settings``.
-
-    ``h_scale``, ``v_scale`` and ``xy_scales`` (x_scale, y_scale) are the oscillator runner's bin scales, so that
-    both kernels bin alike. Returns ``(AutomatonKernel, AutomatonChunks)``.
-    """
-    t0 = time.perf_counter()
-    chunks, identity = _job(model, settings, h_scale, v_scale, xy_scales, scheme)
-    return compile_job(chunks, identity, t0), chunks
-
-
 def plan(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple, scheme: str = "milstein") -> tuple:
-    """What :func:`build` returns before compiling: ``(AutomatonChunks, identity)``, so that a checkpoint of another
-    run is refused before a kernel is built (:func:`compile_job` compiles)."""
+    """The automaton job of the oscillator run ``settings``, nothing compiled: ``(AutomatonChunks, identity)``, so
+    that a checkpoint of another run is refused before a kernel is built (:func:`compile_job` compiles).
+
+    ``h_scale``, ``v_scale`` and ``xy_scales`` (x_scale, y_scale) are the oscillator runner's bin scales."""
     return _job(model, settings, h_scale, v_scale, xy_scales, scheme)
 
 
@@ -252,8 +234,8 @@ def _job(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple
     automaton, observables, src, st = _generated(model, auto_scheme)
     name, user_law = kernel_name(model, auto_scheme, src)
     s = settings
-    n_chunks, cp, paths = s["n_chunks"], s["chunk_paths"], s["paths"]
-    npaths = np.minimum(cp, paths - np.arange(n_chunks, dtype=np.int64) * cp).astype(np.int64)
+    cp, paths = s["chunk_paths"], s["paths"]
+    npaths = _auto_exec.chunk_sizes(paths, cp)
     xy = s["xy_bins"]
     (xlo, _), (ylo, _) = s["xy_range"] if xy is not None else ((0.0, 1.0), (0.0, 1.0))
     nx, ny = xy if xy is not None else (1, 1)
@@ -285,19 +267,19 @@ def _job(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple
     return AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions)), identity
 
 
-def run_on_cuda(model, scheme: str, settings: dict, scales: dict, *, precision: str = "f64",
+def run_on_cuda(model, scheme: str, settings: dict, scales: dict, *, keyed: dict, precision: str = "f64",
                 threads_per_block: int = 128, launch_steps=None, checkpoint=None, resume: bool = False,
                 checkpoint_every: int = 4):
     """The oscillator ensemble of ``settings`` on the GPU: the automaton's CUDA target
     (:class:`~hybrid.stochastic._auto_cuda.CudaRun`, the same generated step code with counter-based normals)
     runs the job the CPU route runs, and its per-chunk rows become the rows of :class:`EnsembleStatistics`.
+    ``keyed``: the settings that decide the numbers (the run's identity in the checkpoint, with the kernel's).
 
     Checkpoints are the automaton engine's (checksummed, tied to the run's settings, the kernel, the precision and
     the device source); the numbers do not depend on ``threads_per_block`` or ``launch_steps``. Returns the
     statistics before the runner's result checks.
     """
     from . import _auto_cuda
-    from ._runner import _RESUME_KEYS, CHECKPOINT_FILE
     from ._statistics import EnsembleStatistics
 
     t0 = time.perf_counter()
@@ -312,14 +294,13 @@ def run_on_cuda(model, scheme: str, settings: dict, scales: dict, *, precision: 
     settings["identity"] = {**identity, "params": {k: float.hex(float(model.params[k])) for k in tuple(model.params)}}
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if ckdir is not None:
-        if resume and (ckdir / CHECKPOINT_FILE).exists():
+        if resume and (ckdir / _auto_exec.ENSEMBLE_CHECKPOINT_FILE).exists():
             raise ParameterError(f"{ckdir} holds a checkpoint of the CPU scheduler, whose random streams differ; "
                                  "resume it without --scheduler cuda, or use another --checkpoint directory")
         _auto_exec.check_directory(ckdir, resume)
-    keyed = json.loads(json.dumps({k: settings.get(k) for k in _RESUME_KEYS}, default=str))
-    run_id = _auto_exec.identity({**keyed, "precision": precision, "device_source": device.name})
-    rows = {k: np.zeros((settings["n_chunks"], *shape), dtype=dtype)
-            for k, (shape, dtype, _) in chunks.job.shapes.items()}
+    run_id = _auto_exec.identity({**keyed, **settings["identity"], "precision": precision,
+                                  "device_source": device.name})
+    rows = chunks.job.zero_rows(settings["n_chunks"])
     device_settings = device.run(rows, run_id=run_id, checkpoint=ckdir, resume=resume,
                                  checkpoint_every=checkpoint_every, launch_steps=launch_steps)
     ids = np.arange(settings["n_chunks"], dtype=np.int64)

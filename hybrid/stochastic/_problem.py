@@ -12,7 +12,41 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from hybrid.errors import VibroWarning
 from hybrid.sizes import MAX_MEMORY, MAX_PATH_STEPS  # the shared size estimator's default limits
+
+
+class StepSizeWarning(VibroWarning):
+    """The step is legal but coarse: the result carries a visible discretisation bias."""
+
+
+class ChatteringWarning(VibroWarning):
+    """Impacts happen on a sizeable share of the steps: the paths chatter against a wall at the step scale."""
+
+
+def positive_int(name: str, value) -> int:
+    """``value`` as a positive int (an integral float such as 4.0 too), or a one-line :class:`ParameterError`.
+
+    Examples
+    --------
+    >>> positive_int("paths", 4.0)
+    4
+    """
+    from hybrid.errors import ParameterError
+
+    if isinstance(value, bool):
+        raise ParameterError(f"{name}={value!r} must be a positive integer")
+    try:
+        iv = int(value)
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: inf
+        raise ParameterError(f"{name}={value!r} must be a positive integer") from exc
+    if iv != value or iv <= 0:
+        raise ParameterError(f"{name}={value!r} must be a positive integer")
+    return iv
+
+
+CHATTER_IMPACTS_PER_STEP = 0.05
+"""Above this many impacts per sampled path-step against inelastic walls, the impacts are not resolved by the step."""
 
 
 @dataclass(frozen=True)

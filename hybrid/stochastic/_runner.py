@@ -1,20 +1,19 @@
-"""The ensemble runner: chunks of paths on threads or on Dask, checkpoints and resume.
+"""The oscillator front end of the one Monte Carlo engine: ``simulate_ensemble``, ``solve_ensemble``,
+``drive_paths`` and ``sample_paths``.
 
-Paths are cut into chunks of ``chunk_paths`` paths (a number that depends on ``paths`` only, never on the threads or
-workers). Locally, chunks run on ``numba.get_num_threads()`` Python threads calling the ``nogil`` kernel. Chunk k
-draws from its own xoshiro256** stream seeded by ``SeedSequence(seed).spawn(n_chunks)[k]`` and writes its own row of
-statistics, so the numbers are bitwise the same for any number of threads, any Dask cluster, any completion order,
-and across a checkpoint and resume.
+An :class:`~models.ImpactOscillator` run is validated here (settings, step rule, noise, initial state), turned into
+the job of its automaton (:mod:`._front`), and run by the executor every ensemble shares
+(:func:`~hybrid.stochastic._auto_exec.run_chunks`: chunks on ``numba.get_num_threads()`` threads or on Dask, the
+one checkpoint format, resume). Each chunk's automaton statistics become a row of :class:`EnsembleStatistics`; the
+numbers are bitwise the same for any number of threads, any Dask cluster, any completion order, and across a
+checkpoint and resume.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numba as nb
@@ -31,37 +30,31 @@ from hybrid.errors import (
     VibroError,
     VibroWarning,
 )
-from hybrid.io import atomic_write
 from hybrid.sizes import check_limit, check_size
 
-from . import _front, _kernel_modules, _rng, _shared_exec
-from ._problem import MAX_MEMORY, MAX_PATH_STEPS, EnsembleProblem, Execution, MonteCarloAlgorithm
+from . import _auto_exec, _front, _kernel_modules, _rng
+from ._auto_exec import check_chunk_count, default_chunk_paths
+from ._problem import (
+    CHATTER_IMPACTS_PER_STEP,
+    MAX_MEMORY,
+    MAX_PATH_STEPS,
+    ChatteringWarning,
+    EnsembleProblem,
+    Execution,
+    MonteCarloAlgorithm,
+    StepSizeWarning,
+    positive_int,
+)
 from ._schemes import get_scheme
 from ._statistics import COUNTS, SUMS, EnsembleStatistics
 
-CHECKPOINT_FILE = "mc_checkpoint.npz"
-CHECKPOINT_FORMAT = 2
-"""Version of the checkpoint layout (2: per-chunk underflow and restitution counts, run identity, checksum)."""
+CHECKPOINT_FILE = _auto_exec.ENSEMBLE_CHECKPOINT_FILE
 
 MIN_CHUNKS_FOR_CI = 8
 """Fewer chunks than this make the batch-means intervals unreliable (a warning says so)."""
-MAX_CHUNKS = 2**20
-"""Most chunks of a CPU run: each needs its own spawned seed (about 30 s and 32 MB of states per million)."""
-
 OUTSIDE_WARN = 1e-3
 """Share of the samples outside a histogram's range above which :class:`HistogramRangeWarning` is raised."""
 
-
-class StepSizeWarning(VibroWarning):
-    """The step is legal but coarse: the result carries a visible discretisation bias."""
-
-
-class ChatteringWarning(VibroWarning):
-    """Impacts happen on a sizeable share of the steps: the paths chatter against a wall at the step scale."""
-
-
-CHATTER_IMPACTS_PER_STEP = 0.05
-"""Above this many impacts per sampled path-step against inelastic walls, the impacts are not resolved by the step."""
 
 EM_TEMPERATURE_BIAS = 0.02
 """Largest relative temperature bias omega0**2 * dt / c of explicit Euler-Maruyama accepted without a warning
@@ -168,16 +161,6 @@ def check_step(model, dt: float, h_max: float = 4.0, scheme=None) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------------- set-up
-def _positive_int(name, value):
-    try:
-        iv = int(value)
-    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: inf
-        raise ParameterError(f"{name}={value!r} must be a positive integer") from exc
-    if iv != value or iv <= 0:
-        raise ParameterError(f"{name}={value!r} must be a positive integer")
-    return iv
-
-
 def _as_x0(x0) -> tuple[float, float]:
     """``x0`` as a pair of floats, or a one-line :class:`ParameterError` (a scalar, a string, complex values)."""
     try:
@@ -259,56 +242,6 @@ def _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_mem
                           "or raise the limit (max_memory=, --max-memory-gb)")
 
 
-def check_chunk_count(paths: int, chunk_paths: int) -> int:
-    """The number of chunks; refuse more than :data:`MAX_CHUNKS` (each chunk spawns its own random stream).
-
-    Examples
-    --------
-    >>> check_chunk_count(10**6, 8)
-    125000
-    """
-    n_chunks = -(-paths // chunk_paths)
-    if n_chunks > MAX_CHUNKS:
-        raise ParameterError(
-            f"paths={paths} in chunks of {chunk_paths} makes {n_chunks} chunks, above the limit {MAX_CHUNKS} (each "
-            f"spawns its own random stream); pass chunk_paths >= {-(-paths // MAX_CHUNKS)} (the numbers then "
-            "depend on that chunk size, as always)"
-        )
-    return n_chunks
-
-
-CHUNK_WORK = 2_000_000
-"""Path-steps a chunk should hold at least (where the paths allow): its fixed cost (a stream, its arrays, a call and
-a row of every per-chunk output) is then below 1 % of its work."""
-CHUNK_SPREAD = 64
-"""Chunks that :func:`default_chunk_paths` keeps at least, where that leaves 8 paths per chunk or more: enough to
-balance up to 16 threads at 4 chunks each. A constant, not the machine's thread count: the chunk size decides the
-numbers, so a default run gives the same numbers on every machine."""
-
-
-def default_chunk_paths(paths: int, steps: float | None = None) -> int:
-    """Paths per chunk, from the paths and the steps of each (shown as ``chunk_paths`` in the run's settings).
-
-    8 (the kernel interleaves 8 lanes), fewer when that would leave fewer than 8 chunks. Where the paths are many
-    and short, larger chunks (multiples of 8) of about :data:`CHUNK_WORK` path-steps, while at least
-    :data:`CHUNK_SPREAD` chunks remain: 2**20 paths of 1,000 steps run in 525 chunks of 2,000 paths, not in
-    131,072 chunks of 8 whose fixed costs and per-chunk rows outweigh the work.
-
-    Examples
-    --------
-    >>> default_chunk_paths(256), default_chunk_paths(10), default_chunk_paths(256, 10**6)
-    (8, 1, 8)
-    >>> default_chunk_paths(2**20, 1000), default_chunk_paths(4096, 100)
-    (2000, 64)
-    """
-    chunk = max(1, min(8, paths // 8))
-    if steps is not None and steps >= 1:  # steps in floats: t_end / dt may exceed every integer type
-        by_work = math.ceil(CHUNK_WORK / steps)
-        by_spread = paths // CHUNK_SPREAD
-        chunk = max(chunk, min(by_work, by_spread) // 8 * 8)
-    return max(chunk, -(-paths // MAX_CHUNKS))
-
-
 def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bins, xy_range, stride, chunk_paths,
               v_bins, v_max, x0, max_path_steps=MAX_PATH_STEPS, max_memory=MAX_MEMORY) -> dict:
     real = (int, float, np.integer, np.floating)
@@ -319,17 +252,17 @@ def _settings(model, scheme, dt, paths, t_end, t_burn, seed, h_max, bins, xy_bin
         raise ParameterError(f"t_burn={t_burn!r} must be a finite number >= 0")
     if t_burn >= t_end:
         raise ParameterError(f"t_burn={t_burn:g} must be smaller than t_end={t_end:g} (nothing would be sampled)")
-    paths = _positive_int("paths", paths)
-    bins = _positive_int("bins", bins)
-    stride = _positive_int("stride", stride)
-    v_bins = _positive_int("v_bins", v_bins)
+    paths = positive_int("paths", paths)
+    bins = positive_int("bins", bins)
+    stride = positive_int("stride", stride)
+    v_bins = positive_int("v_bins", v_bins)
     chunk_paths = (default_chunk_paths(paths, float(t_end) / float(dt)) if chunk_paths is None
-                   else _positive_int("chunk_paths", chunk_paths))
+                   else positive_int("chunk_paths", chunk_paths))
     chunk_paths = min(chunk_paths, paths)  # one chunk holds every path: same numbers, no arrays for absent paths
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed={seed!r} must be a non-negative integer (randomness only from explicit seeds)")
     if xy_bins is not None:
-        xy_bins = [_positive_int("xy_bins", b) for b in xy_bins]
+        xy_bins = [positive_int("xy_bins", b) for b in xy_bins]
         if len(xy_bins) != 2:
             raise ParameterError(f"xy_bins={xy_bins!r} must be two positive integers (nx, ny)")
     _check_work(paths, dt, t_end, bins, xy_bins, v_bins, max_path_steps, max_memory)
@@ -381,47 +314,33 @@ def _scales(s: dict) -> dict:
                 y_scale=_bin_scale(ylo, yhi, ny), v_scale=_bin_scale(0.0, s["v_max"], s["v_bins"]))
 
 
-def _remote_run(job, ids, states):
-    """Dask task: load (or generate) the kernel on the worker and run the chunks."""
-    return job.run(ids, states)
-
-
 # ---------------------------------------------------------------------------------------------------- checkpoints
-def _write_checkpoint(directory: Path, stats: EnsembleStatistics) -> None:
-    directory.mkdir(parents=True, exist_ok=True)
-    arrays = stats.to_arrays()
-    arrays["format"] = np.array(CHECKPOINT_FORMAT)
-    arrays["checksum"] = np.array(_shared_exec.checksum(arrays))
-    # the shared writer: a unique temporary name (ends in .npz, so savez adds nothing), removed on failure
-    atomic_write(directory / CHECKPOINT_FILE, lambda tmp: np.savez(tmp, **arrays))
-
-
 _RESUME_KEYS = ("scheme", "dt", "paths", "t_end", "t_burn", "seed", "h_max", "bins", "xy_bins", "xy_range", "stride",
-                "chunk_paths", "v_bins", "v_max", "x0", "model", "fingerprint", "identity")
-_IDENTITY_NAMES = {"kernel": "generated kernel", "law": "restitution law", "params": "model parameters"}
+                "chunk_paths", "v_bins", "v_max", "x0", "model", "fingerprint")
+
+
+def _run_id(settings: dict) -> str:
+    """The identity of the run ``settings`` in checkpoints: the keyed settings, the kernel, the law's numbers and the
+    model's parameters (a resume with any of them changed is refused, naming it)."""
+    return _auto_exec.identity({**{k: settings.get(k) for k in _RESUME_KEYS}, **settings.get("identity", {})})
+
+
+def _write_checkpoint(directory: Path, stats: EnsembleStatistics) -> None:
+    """The checkpoint of the statistics so far, in the one format (:func:`~hybrid.stochastic._auto_exec.write`)."""
+    done = np.zeros(int(stats.settings["n_chunks"]), bool)
+    done[stats.chunk_ids] = True
+    _auto_exec.write(directory, _run_id(stats.settings), done, stats.to_arrays(), CHECKPOINT_FILE)
 
 
 def _load_checkpoint(directory: Path, settings: dict) -> EnsembleStatistics | None:
-    path = directory / CHECKPOINT_FILE
-    if not path.exists():
+    arrays = _auto_exec.read(directory, _run_id(settings), CHECKPOINT_FILE)
+    if arrays is None:
         return None
-    hint = "delete it or use another --checkpoint directory"
-    arrays = _shared_exec.read_checked(path, CHECKPOINT_FORMAT, hint)
     try:
-        stats = EnsembleStatistics.from_arrays(arrays)
+        return EnsembleStatistics.from_arrays({k: v for k, v in arrays.items() if k not in ("done", "format")})
     except Exception as exc:
-        raise CheckpointError(f"checkpoint {path} is not a valid checkpoint ({type(exc).__name__}); {hint}") from None
-    old = json.loads(json.dumps({k: stats.settings.get(k) for k in _RESUME_KEYS}))
-    new = json.loads(json.dumps({k: settings.get(k) for k in _RESUME_KEYS}))
-    diff = [k for k in _RESUME_KEYS if k != "identity" and old[k] != new[k]]
-    oid, nid = old["identity"] or {}, new["identity"] or {}
-    diff += [_IDENTITY_NAMES.get(k, k) for k in sorted(set(oid) | set(nid)) if oid.get(k) != nid.get(k)]
-    if diff:
-        raise CheckpointError(
-            f"checkpoint {path} was made with other settings ({', '.join(diff)} differ); resume with the same "
-            "arguments or use another --checkpoint directory"
-        )
-    return stats
+        raise CheckpointError(f"checkpoint {directory / CHECKPOINT_FILE} is not a valid checkpoint "
+                              f"({type(exc).__name__}); delete it or use another --checkpoint directory") from None
 
 
 def _outside_warnings(stats: EnsembleStatistics) -> None:
@@ -461,6 +380,17 @@ def _bad_restitution(model, cnt, sm, ids) -> None:
         row = int(np.flatnonzero(n_bad)[0])
         _refuse_bad_e(model, int(n_bad.sum()), sm[row, SUMS.index("bad_e_speed")],
                       sm[row, SUMS.index("bad_e_value")], f"of chunk {int(ids[row])}")
+
+
+def _in_kernel(model, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``; an exception raised inside the compiled kernel (a callable law, a math domain
+    error) becomes one line (:func:`_run_error`), the framework's own errors pass as they are."""
+    try:
+        return fn(*args, **kwargs)
+    except VibroError:
+        raise
+    except Exception as exc:
+        raise _run_error(model, exc) from exc
 
 
 def _run_error(model, exc: Exception) -> VibroError:
@@ -599,7 +529,9 @@ def solve_ensemble(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm | No
     sch, settings = _prepare(problem, algorithm, execution)
     ex = execution
     if ex.scheduler == "cuda":  # the automaton's CUDA target runs the same job; the result checks are shared
-        stats = _front.run_on_cuda(model, sch.name, settings, _scales(settings), precision=algorithm.precision,
+        keyed = {k: settings.get(k) for k in _RESUME_KEYS}
+        stats = _front.run_on_cuda(model, sch.name, settings, _scales(settings), keyed=keyed,
+                                   precision=algorithm.precision,
                                    threads_per_block=ex.threads_per_block, launch_steps=ex.launch_steps,
                                    checkpoint=ex.checkpoint, resume=ex.resume,
                                    checkpoint_every=int(ex.checkpoint_every))
@@ -633,7 +565,7 @@ def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execu
                              "double only)")
     if ex.resume and ex.checkpoint is None:
         raise ParameterError("resume=True needs a checkpoint directory")
-    _positive_int("checkpoint_every", ex.checkpoint_every)
+    positive_int("checkpoint_every", ex.checkpoint_every)
     settings["kernel"] = _choose_kernel(model, sch, algorithm.kernel, gpu)
     return sch, settings
 
@@ -652,14 +584,12 @@ def _choose_kernel(model, sch, kernel, gpu: bool) -> str:
 
 
 def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics:
-    """Chunks on local threads or Dask, with checkpoints: the statistics before the result checks."""
-    checkpoint, resume, checkpoint_every = ex.checkpoint, ex.resume, int(ex.checkpoint_every)
-    local = ex.scheduler in (None, "threads", "local")
+    """The oscillator's automaton job on local threads or Dask through the shared executor, with checkpoints: the
+    statistics before the result checks."""
+    checkpoint, resume = ex.checkpoint, ex.resume
     ckdir = Path(checkpoint) if checkpoint is not None else None
     if ckdir is not None:
-        _shared_exec.prepare_directory(ckdir)
-        if not resume and (ckdir / CHECKPOINT_FILE).exists():
-            raise ParameterError(f"{ckdir / CHECKPOINT_FILE} exists; pass resume=True (--resume) or another directory")
+        _auto_exec.check_directory(ckdir, resume, CHECKPOINT_FILE)
     law_fn = getattr(model.restitution, "callable", None)
     if ckdir is not None and law_fn is not None and _kernel_modules.callable_digest(law_fn) is None:
         raise CheckpointError(
@@ -669,8 +599,8 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
         )
     scales = _scales(settings)
     t0 = time.perf_counter()
-    job, identity = _front.plan(model, settings, scales["h_scale"], scales["v_scale"],
-                                (scales["x_scale"], scales["y_scale"]), sch.name)
+    chunks, identity = _front.plan(model, settings, scales["h_scale"], scales["v_scale"],
+                                   (scales["x_scale"], scales["y_scale"]), sch.name)
     settings["identity"] = {**identity,
                             "params": {k: float.hex(float(model.params[k])) for k in tuple(model.params)}}
     states = _rng.chunk_states(settings["seed"], settings["n_chunks"])
@@ -678,7 +608,7 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
     stats = None
     if ckdir is not None and resume:  # before compiling: a checkpoint of another run must not cost a kernel build
         stats = _load_checkpoint(ckdir, settings)
-    kern = _front.compile_job(job, identity, t0)
+    kern = _front.compile_job(chunks, identity, t0)
     if stats is None:
         stats = EnsembleStatistics.empty(settings)
     stats.settings.update({k: v for k, v in settings.items() if k not in stats.settings})
@@ -691,10 +621,8 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
         from tqdm.auto import tqdm
 
         bar = tqdm(total=settings["n_chunks"], initial=stats.done_chunks, unit="chunk", desc=f"mc {sch.name}")
-    since = 0
     t_start = time.perf_counter()
     wall0 = stats.wall_time
-
     buffer: list = []
 
     def flush():
@@ -702,39 +630,32 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
         if buffer:
             stats.add_chunks(*(np.concatenate(parts) for parts in zip(*buffer)))
             buffer.clear()
+        stats.wall_time = wall0 + time.perf_counter() - t_start
 
     # integer histograms add exactly in any grouping: bound the buffered ones by memory as well as by count
     hist_bytes = 8 * (settings["bins"] + settings["v_bins"] + (math.prod(settings["xy_bins"]) if settings["xy_bins"]
                                                                else 0))
     max_buffer = max(1, min(max(32, stats.done_chunks // 4), (64 << 20) // hist_bytes))
 
-    def accept(result):
-        nonlocal since
+    def accept(k, out):
+        result = chunks.rows([k], [out])  # the automaton's statistics as a row of EnsembleStatistics
         _bad_restitution(model, result[5], result[6], result[0])  # before the chunk can reach a checkpoint
         buffer.append(result)
-        stats.wall_time = wall0 + time.perf_counter() - t_start
-        since += len(result[0])
-        if bar is not None:
-            bar.update(len(result[0]))
-        if ckdir is not None and since >= checkpoint_every:
-            flush()
-            _write_checkpoint(ckdir, stats)
-            since = 0
-        elif len(buffer) >= min(max(32, stats.done_chunks // 4), max_buffer):
+        if len(buffer) >= min(max(32, stats.done_chunks // 4), max_buffer):
             flush()
 
+    def save():
+        flush()
+        _write_checkpoint(ckdir, stats)
+
     try:
-        _run_chunks(job, kern, pending, states, local, ex.scheduler, accept, flush, ckdir, stats)
-    except VibroError:
-        raise
-    except Exception as exc:  # raised inside the kernel (a callable law, a math domain error): one line
-        raise _run_error(model, exc) from exc
+        _in_kernel(model, _auto_exec.run_chunks, chunks.job, pending, states, accept, threads=nb.get_num_threads(),
+                   scheduler=ex.scheduler, module=kern.module, save=save if ckdir is not None else None,
+                   checkpoint_every=int(ex.checkpoint_every), progress=bar)
     finally:
         if bar is not None:
             bar.close()
-    stats.wall_time = wall0 + time.perf_counter() - t_start
-    if ckdir is not None:
-        _write_checkpoint(ckdir, stats)
+    flush()
     return stats
 
 
@@ -768,45 +689,6 @@ def _check_result(model, stats: EnsembleStatistics, settings: dict, dt: float) -
     return stats
 
 
-def _run_chunks(job, kern, pending, states, local, scheduler, accept, flush, ckdir, stats) -> None:
-    """Run the pending chunks locally or on Dask; on any exit keep every finished chunk in the checkpoint."""
-    try:
-        if local:
-            # one chunk per call of the nogil kernel, numba.get_num_threads() calls at a time
-            pool = ThreadPoolExecutor(max_workers=nb.get_num_threads())
-            try:
-                runs = pool.map(lambda k: job.run(np.array([k], np.int64), states[[k]], kern.module), pending)
-                for result in runs:
-                    accept(result)
-            finally:  # on Ctrl-C do not wait for the queued chunks (the checkpoint keeps what is done)
-                pool.shutdown(wait=False, cancel_futures=True)
-        else:
-            if kern.path is None:
-                raise ParameterError(
-                    "a Python-callable restitution law is compiled in memory and cannot be shipped to Dask workers; "
-                    "declare it as a sympy expression of v (CustomRestitution('...')) or use the local threads"
-                )
-            _run_dask(job, pending, states, scheduler, accept)
-        flush()
-    except BaseException:
-        flush()
-        if ckdir is not None and stats.done_chunks:  # keep every finished chunk for --resume
-            _write_checkpoint(ckdir, stats)
-        raise
-
-
-def _run_dask(job, pending, states, scheduler, accept) -> None:
-    with _shared_exec.dask_client(scheduler) as client:
-        from distributed import as_completed  # present: the client was made
-
-        # the job travels inside each task (a few kB): scattered data would be lost with a killed worker
-        futures = [client.submit(_remote_run, job, np.array([k]), states[[k]], pure=False, retries=3,
-                                 key=f"vibro-mc-{job.name}-{job.seed}-{k}-{os.getpid()}-{time.time_ns()}")
-                   for k in pending]
-        for fut in as_completed(futures):
-            accept(fut.result())
-
-
 def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     """Final states (paths, 2) of paths driven by given standard normals ``normals`` (paths, steps), one per step.
 
@@ -836,13 +718,8 @@ def drive_paths(model, scheme, dt: float, normals, x0=(0.0, 0.0)) -> np.ndarray:
     dws = np.ascontiguousarray((math.sqrt(float(dt)) * z)[:, :, None])
     out = np.empty((n, 2))
     bad = np.zeros(3)
-    try:
-        module.drive(np.array(x0, dtype=float), 0, dws, float(dt), 0.0, prm, out, np.empty((n, 0, 3)),
-                     np.zeros(n, dtype=np.int64), bad)
-    except VibroError:
-        raise
-    except Exception as exc:
-        raise _run_error(model, exc) from exc
+    _in_kernel(model, module.drive, np.array(x0, dtype=float), 0, dws, float(dt), 0.0, prm, out, np.empty((n, 0, 3)),
+               np.zeros(n, dtype=np.int64), bad)
     _refuse_failed_checks(model, bad, "of the driven paths")
     return out
 
@@ -864,8 +741,8 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     (2, 11)
     """
     sch = get_scheme(scheme)
-    paths = _positive_int("paths", paths)
-    every = _positive_int("every", every)
+    paths = positive_int("paths", paths)
+    every = positive_int("every", every)
     if not (math.isfinite(dt) and dt > 0 and math.isfinite(t_end) and t_end > 0):
         raise ParameterError(f"dt={dt!r} and t_end={t_end!r} must be finite and positive")
     nstep = int(round(t_end / dt))
@@ -878,7 +755,7 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     _check_noise(model)
     _front.check_model(model, sch)
     chunk = (default_chunk_paths(paths, float(t_end) / float(dt)) if chunk_paths is None
-             else _positive_int("chunk_paths", chunk_paths))
+             else positive_int("chunk_paths", chunk_paths))
     chunk = min(chunk, paths)  # as simulate_ensemble chooses it: the same chunks, the same streams
     states = _rng.chunk_states(seed, check_chunk_count(paths, chunk))
     if check_dt:
@@ -891,13 +768,8 @@ def sample_paths(model, scheme="milstein", dt=1e-3, t_end=10.0, paths=4, every=1
     for k, state in enumerate(states):
         lo = k * chunk
         part = np.zeros(3)
-        try:
-            module.record_chunk(state.copy(), min(chunk, paths - lo), (nrec - 1) * every, every, float(dt), 0.0,
-                                np.array(x0, dtype=float), 0, prm, zx, zk, zf, out[lo: lo + chunk], part)
-        except VibroError:
-            raise
-        except Exception as exc:
-            raise _run_error(model, exc) from exc
+        _in_kernel(model, module.record_chunk, state.copy(), min(chunk, paths - lo), (nrec - 1) * every, every,
+                   float(dt), 0.0, np.array(x0, dtype=float), 0, prm, zx, zk, zf, out[lo: lo + chunk], part)
         if part[0] and not bad[0]:
             bad[1] = part[1]
         bad[0] += part[0]

@@ -84,6 +84,33 @@ def ratio_estimate(num: np.ndarray, den: np.ndarray, level: float = 0.95) -> Est
     return Estimate(value, float(_st.t.ppf(0.5 + level / 2, n - 1) * math.sqrt(var)), n)
 
 
+def joint_frame(x_edges, y_edges, counts, outside: int, total: int):
+    """A joint histogram ``counts`` (ny, nx) in long form: x_lo, x_hi, y_lo, y_hi, count, density (normalised by
+    all ``total`` samples), and a last row with NaN edges and density counting the ``outside`` samples: the shape of
+    every joint histogram written (oscillator and automaton ensembles alike).
+
+    Examples
+    --------
+    >>> f = joint_frame(np.array([0.0, 1.0]), np.array([0.0, 2.0]), np.array([[3]]), 1, 4)
+    >>> f["count"].tolist(), f["density"].tolist()[0]
+    ([3, 1], 0.375)
+    """
+    import pandas as pd
+
+    xe, ye = np.asarray(x_edges, float), np.asarray(y_edges, float)
+    counts = np.asarray(counts)
+    ny, nx = counts.shape
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
+    area = np.outer(np.diff(ye), np.diff(xe))
+    density = counts / (total * area) if total else np.zeros_like(area)
+    nan = [np.nan]
+    return pd.DataFrame({
+        "x_lo": np.concatenate([xe[ix.ravel()], nan]), "x_hi": np.concatenate([xe[ix.ravel() + 1], nan]),
+        "y_lo": np.concatenate([ye[iy.ravel()], nan]), "y_hi": np.concatenate([ye[iy.ravel() + 1], nan]),
+        "count": np.concatenate([counts.ravel(), [outside]]), "density": np.concatenate([density.ravel(), nan]),
+    })
+
+
 class EnsembleStatistics:
     """Histograms and moments of an ensemble; chunks merge exactly.
 
@@ -349,24 +376,14 @@ class EnsembleStatistics:
         return atomic_write_text(path, self.to_pandas().to_csv(index=False, float_format="%.17g"))
 
     def joint_to_pandas(self):
-        """The (x, y) histogram in long form: x_lo, x_hi, y_lo, y_hi, count, density.
+        """The (x, y) histogram in long form: x_lo, x_hi, y_lo, y_hi, count, density (:func:`joint_frame`).
 
         A last row with NaN edges and density counts the samples outside the window.
         """
-        import pandas as pd
-
         if self.xy_counts is None:
             raise ParameterError("no joint histogram was collected (xy_bins=None)")
-        xe, ye = self.xy_edges
-        ny, nx = self.xy_counts.shape
-        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
-        nan = [np.nan]
-        return pd.DataFrame({
-            "x_lo": np.concatenate([xe[ix.ravel()], nan]), "x_hi": np.concatenate([xe[ix.ravel() + 1], nan]),
-            "y_lo": np.concatenate([ye[iy.ravel()], nan]), "y_hi": np.concatenate([ye[iy.ravel() + 1], nan]),
-            "count": np.concatenate([self.xy_counts.ravel(), [self.outside()["xy"]["outside"]]]),
-            "density": np.concatenate([self.xy_density().ravel(), nan]),
-        })
+        out = self.outside()["xy"]
+        return joint_frame(*self.xy_edges, self.xy_counts, out["outside"], out["total"])
 
     def summary(self) -> dict:
         """Main figures as a JSON-friendly dict."""

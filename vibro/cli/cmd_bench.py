@@ -25,13 +25,14 @@ def register(subparsers) -> None:
     p.add_argument("--quick", action="store_true",
                    help="small sizes: a few minutes on 2 cores (default: the full sizes, several times longer)")
     p.add_argument("--parts", default=None,
-                   help="comma-separated subset: work-precision mc,averaging,deterministic; validity "
+                   help="comma-separated subset: work-precision mc,averaging,deterministic,forced,coloured; validity "
                         "averaging,mc,orbits (default: every part)")
     p.add_argument("--tol", type=float, default=0.02, help="solve-verify: the tolerance (default 0.02)")
     p.set_defaults(func=run)
 
 
-PARTS = {"work-precision": ("mc", "averaging", "deterministic"), "validity": ("averaging", "mc", "orbits")}
+PARTS = {"work-precision": ("mc", "averaging", "deterministic", "forced", "coloured"),
+         "validity": ("averaging", "mc", "orbits")}
 """The parts of each task that --parts may name."""
 
 

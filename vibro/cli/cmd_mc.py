@@ -5,14 +5,15 @@
              [--checkpoint DIR] [--resume] [--scheduler dask[=ADDRESS]|cuda] [--precision f64|f32]
 
 A forced model (``ImpactOscillator(..., forcing="A*cos(Omega*t)")``) runs through its automaton
-(``hybrid.stochastic.simulate_automaton``); ``--phases N`` then also writes the histograms of H, x and y at N phases
-of the forcing period (one long CSV with a ``phase`` column, ``--phases-out``).
+(``hybrid.stochastic.simulate_automaton``, with checkpoints and every scheduler); ``--phases N`` then also writes the
+histograms of H, x and y at N phases of the forcing period (one long CSV with a ``phase`` column, ``--phases-out``).
+Every route writes its files through :mod:`vibro.cli.mc_outputs` (the same CSV shapes, sidecars and summary); a
+model with walls or transitions also gets ``STEM_transitions.csv`` (firings and rate of each).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -24,6 +25,7 @@ from vibro.cli.density_check import check_energy_histogram, check_xy_histogram
 from vibro.cli.mc_automaton import add_arguments as add_automaton_arguments
 from vibro.cli.mc_automaton import automaton_from_args, scheme_for
 from vibro.cli.mc_automaton import run as run_automaton
+from vibro.cli.mc_outputs import beside, common_results, transitions_frame, wall_transitions, write_outputs
 from vibro.cli.names import AUTOMATON_ONLY_SCHEMES, SCHEMES
 
 
@@ -86,8 +88,8 @@ def register(subparsers) -> None:
 def run(args) -> int:
     """Run the ensemble described by ``args``; print the summary; write the CSV files."""
 
-    from hybrid.stochastic import atomic_write_text, simulate_ensemble
-    from vibro.provenance import record, write_sidecar
+    from hybrid.stochastic import simulate_ensemble
+    from vibro.provenance import record
 
     plan = plan_outputs(args)  # every path checked before the run, not after it
     if not (0 < args.max_memory_gb < float("inf")):
@@ -108,6 +110,8 @@ def run(args) -> int:
     if resolved is not None:
         return run_automaton(args, resolved, plan)
     model = model_from_args(args)
+    if wall_transitions(model.barriers):  # firings and rates of the walls, as an automaton's transitions
+        plan.file(beside(args.out, "transitions"), "the transitions file of --out", sidecar=True)
     started = time.perf_counter()
     if getattr(model, "is_forced", False) or args.phases:
         return _run_forced(args, model, started, plan)
@@ -132,18 +136,20 @@ def run(args) -> int:
     check_energy_histogram(args.out, stats.h_edges, stats.h_counts, stats.mean_energy.value)
     if args.joint:
         check_xy_histogram(args.joint, *stats.xy_edges, stats.xy_counts, stats.mean_energy.value)
-    stats.to_csv(args.out)
-    if args.joint:
-        atomic_write_text(args.joint, stats.joint_to_pandas().to_csv(index=False, float_format="%.17g"))
     settings = {**stats.settings, "scheduler": args.scheduler or "threads",
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads, "
                                    "workers or launches"}
-    rec = record("mc", model=model, settings=settings, results=stats.summary(), started=started)
-    write_sidecar(args.out, rec)
-    if args.joint:  # its own record, so that vibro plot finds the barriers beside the joint CSV too
-        write_sidecar(args.joint, joint_record(rec, args.xy_bins))
-    if args.summary_json:
-        atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
+    rec = record("mc", model=model, settings=settings, results={**stats.summary(), **common_results(stats)},
+                 started=started)
+    files = [(args.out, stats.to_pandas(), None, None)]
+    if args.joint:
+        files.append((args.joint, stats.joint_to_pandas(), "joint", {"xy_bins": list(args.xy_bins)}))
+    walls = wall_transitions(model.barriers)
+    if walls:
+        files.append((beside(args.out, "transitions"), transitions_frame(
+            walls, [stats.total(f"impacts_{w}") for w in walls],
+            [getattr(stats, f"impact_rate_{w}").value for w in walls]), "transitions", None))
+    written = write_outputs(files, rec, args.summary_json)
     g = stats.settings["g_barrier"]
     print(f"vibro mc: {stats.settings['scheme']} dt={stats.settings['dt']:g} paths={stats.paths} "
           f"seed={stats.seed} path-steps={stats.path_steps:.4g}")
@@ -168,21 +174,15 @@ def run(args) -> int:
     if stats.violations:
         print(f"  WARNING: {stats.violations} steps ended outside the barriers", file=sys.stderr)
         return 1
-    print(f"  wrote {args.out}" + (f" and {args.joint}" if args.joint else ""))
+    print("  wrote " + ", ".join(str(w) for w in written))
     return 0
-
-
-def joint_record(rec: dict, xy_bins) -> dict:
-    """The provenance of the ``--joint`` histogram: the run's record, saying which output it describes."""
-    return {**rec, "output": "joint", "settings": {**rec["settings"], "xy_bins": list(xy_bins)}}
 
 
 def plan_outputs(args):
     """The files and folder ``vibro mc`` writes, checked together (writable, no two on one file) before the run."""
     from pathlib import Path
 
-    from hybrid.stochastic._auto_exec import CHECKPOINT_FILE as AUTOMATON_CHECKPOINT
-    from hybrid.stochastic._runner import CHECKPOINT_FILE
+    from hybrid.stochastic._auto_exec import CHECKPOINT_FILE, ENSEMBLE_CHECKPOINT_FILE
     from vibro.cli.common import output_plan
 
     plan = output_plan(args)
@@ -193,25 +193,18 @@ def plan_outputs(args):
         plan.file(args.summary_json, "--summary-json")
     if args.checkpoint is not None:
         plan.folder(args.checkpoint, "--checkpoint")
-        for name in (CHECKPOINT_FILE, AUTOMATON_CHECKPOINT):  # the files it will hold
+        for name in (CHECKPOINT_FILE, ENSEMBLE_CHECKPOINT_FILE):  # the files it may hold
             plan.claim(Path(args.checkpoint) / name, "the checkpoint file in --checkpoint")
     return plan
 
 
 def _run_forced(args, model, started, plan) -> int:
     """A forced model: Monte Carlo of its automaton (simulate_automaton), time-averaged and phase-resolved."""
-    import numpy as np
     import pandas as pd
 
     from hybrid.errors import ModelError
-    from hybrid.stochastic import (
-        AUTOMATON_SCHEME_OF,
-        AUTOMATON_SCHEMES,
-        atomic_write_text,
-        default_chunk_paths,
-        simulate_automaton,
-    )
-    from vibro.provenance import record, write_sidecar
+    from hybrid.stochastic import AUTOMATON_SCHEME_OF, AUTOMATON_SCHEMES, simulate_automaton
+    from vibro.provenance import record
 
     period = model.forcing_period
     if args.phases:
@@ -225,11 +218,6 @@ def _run_forced(args, model, started, plan) -> int:
     if args.scheme not in set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF):
         raise ParameterError(f"--scheme {args.scheme}: a forced model runs through its automaton, with the schemes "
                              f"{sorted(set(AUTOMATON_SCHEMES) | set(AUTOMATON_SCHEME_OF))}")
-    for flag, value in (("--checkpoint", args.checkpoint), ("--scheduler", args.scheduler if args.scheduler
-                                                                    not in (None, "threads", "cuda") else None)):
-        if value is not None:
-            raise ParameterError(f"{flag} is not available for a forced model (its automaton runs on local "
-                                 "threads or --scheduler cuda, without checkpoints); drop it")
     if model.energy_expr is None:
         raise ModelError("the Monte Carlo of a forced model needs G(x) in closed form for H; sympy cannot "
                          f"integrate g = {model.g}")
@@ -252,9 +240,10 @@ def _run_forced(args, model, started, plan) -> int:
             automaton, scheme, dt=args.dt, paths=args.paths, t_end=args.t_end, t_burn=args.t_burn,
             x0=(0.0, 0.0), seed=args.seed, observables={"H": model.energy_expr, "x": "x", "y": "y"},
             histograms=histograms, joint=joint, stride=args.stride,
-            chunk_paths=args.chunk_paths or default_chunk_paths(args.paths), max_path_steps=args.max_path_steps,
-            phases=args.phases, period=period if args.phases else None,
-            **({"scheduler": "cuda", "precision": args.precision, "threads_per_block": args.threads_per_block}
+            chunk_paths=args.chunk_paths, max_path_steps=args.max_path_steps,
+            phases=args.phases, period=period if args.phases else None, scheduler=args.scheduler,
+            checkpoint=args.checkpoint, resume=args.resume, checkpoint_every=args.checkpoint_every,
+            **({"precision": args.precision, "threads_per_block": args.threads_per_block}
                if args.scheduler == "cuda" else {}),
         )
     for text in dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught):
@@ -263,28 +252,9 @@ def _run_forced(args, model, started, plan) -> int:
     check_energy_histogram(args.out, edges, ens.counts["H"][1:-1], ens.mean("H").value)
     if args.joint:
         check_xy_histogram(args.joint, ens.joint[2], ens.joint[3], ens.joint[4], ens.mean("H").value)
-    frame = ens.to_pandas("H").rename(columns={"lo": "H_lo", "hi": "H_hi"})
-    atomic_write_text(args.out, frame.to_csv(index=False, float_format="%.17g"))
-    written = [args.out]
-    if args.joint:
-        xn, yn, xe, ye, counts = ens.joint
-        iy, ix = np.indices(counts.shape)
-        cell = np.diff(xe)[ix.ravel()] * np.diff(ye)[iy.ravel()]
-        total = max(ens.flags["samples"], 1)
-        jf = pd.DataFrame({"x_lo": xe[ix.ravel()], "x_hi": xe[ix.ravel() + 1], "y_lo": ye[iy.ravel()],
-                           "y_hi": ye[iy.ravel() + 1], "count": counts.ravel(),
-                           "density": counts.ravel() / total / cell})
-        atomic_write_text(args.joint, jf.to_csv(index=False, float_format="%.17g"))
-        written.append(args.joint)
-    if args.phases:
-        long = pd.concat([ens.phase_to_pandas(nm).assign(observable=nm) for nm in ens.names], ignore_index=True)
-        long = long[["observable", "phase", "t_phase", "lo", "hi", "count", "density"]]
-        atomic_write_text(phases_path(args), long.to_csv(index=False, float_format="%.17g"))
-        written.append(str(phases_path(args)))
     H = ens.mean("H")
     rates = {tr: ens.rate(tr) for tr in ens.transitions}
-    results = {**ens.summary(), "mean_energy": {"value": H.value, "ci": H.ci},
-               "impact_rate": sum(rates.values()), "engine": "automaton"}
+    results = {**ens.summary(), **common_results(ens), "impact_rate": sum(rates.values()), "engine": "automaton"}
     if args.phases:
         results["phase_mean_x"] = [{"t_phase": float(tk), "value": ens.phase_mean("x", k).value,
                                     "ci": ens.phase_mean("x", k).ci} for k, tk in enumerate(ens.phase_times())]
@@ -294,14 +264,17 @@ def _run_forced(args, model, started, plan) -> int:
                 "reproducible_as": "the same seed and chunk_paths give the same numbers on any number of threads"
                 if args.scheduler != "cuda" else "the same seed gives the same numbers on any launch configuration"}
     rec = record("mc", model=model, settings=settings, results=results, started=started)
-    write_sidecar(args.out, rec)
+    files = [(args.out, ens.to_pandas("H").rename(columns={"lo": "H_lo", "hi": "H_hi"}), None, None)]
     if args.joint:
-        write_sidecar(args.joint, joint_record(rec, args.xy_bins))
+        files.append((args.joint, ens.joint_to_pandas(), "joint", {"xy_bins": list(args.xy_bins)}))
     if args.phases:
-        write_sidecar(phases_path(args), {**rec, "output": "phases",
-                                           "settings": {**rec["settings"], "phases": args.phases}})
-    if args.summary_json:
-        atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
+        long = pd.concat([ens.phase_to_pandas(nm).assign(observable=nm) for nm in ens.names], ignore_index=True)
+        files.append((phases_path(args), long[["observable", "phase", "t_phase", "lo", "hi", "count", "density"]],
+                      "phases", {"phases": args.phases}))
+    if ens.transitions:
+        files.append((beside(args.out, "transitions"), transitions_frame(ens.transitions, ens.events, rates.values()),
+                      "transitions", None))
+    written = write_outputs(files, rec, args.summary_json)
     steps = ens.settings["paths"] * ens.settings["t_end"] / ens.settings["dt"]
     dt_note = (f" (lowered from {ens.settings['dt_requested']:g} so that T = {args.phases} x "
                f"{ens.settings['phase_steps']} steps)" if args.phases else "")

@@ -49,7 +49,7 @@ def register(subparsers) -> None:
                    help=f"--method auto: target L1 distance of p(H) on 40 bins (default {PDF_TOL})")
     p.add_argument("--grid", type=int, nargs=2, default=None, metavar=("N1", "N2"),
                    help="--method fpk: energy rings and angle cells per ring (default 160 192), or with the "
-                        "Cartesian scheme cells in x and in y (default 120 120; 60 120 for a forced model, which "
+                        "Cartesian scheme cells in x and in y (default 120 120; 64 128 for a forced model, which "
                         "uses Cartesian cells unless --scheme rings); cost ~ N1 x N2 (a sparse LU)")
     p.add_argument("--scheme", choices=("auto", "rings", "cartesian"), default="auto",
                    help="--method fpk: energy-angle rings (single well) or Cartesian cells (any number of wells, "
@@ -66,7 +66,7 @@ def register(subparsers) -> None:
     p.add_argument("--phases-out", default=None, metavar="FILE",
                    help="CSV of the phase-resolved densities (observable,phase,t_phase,lo,hi,density; default: OUT "
                         "with _phases before the suffix)")
-    p.add_argument("--steps", type=int, default=32,
+    p.add_argument("--steps", type=int, default=64,
                    help="--method fpk, forced models: time steps per forcing period (Crank-Nicolson at this and twice "
                         "as many steps, combined: fourth order; rounded up to a multiple of --phases); cost ~ steps")
     p.add_argument("--extrapolate", action="store_true",
@@ -195,7 +195,8 @@ def _run_forced(args, model, plan) -> int:
     results = {"mean_energy": sol.mean_energy, "impact_rate": sol.impact_rate, "mean_x2": sd.mean_x2,
                "prob_below_barrier": sd.prob_below_barrier, "periodicity": sol.periodicity,
                "conservation": sol.conservation, "gmres_iterations": sol.iterations,
-               "error_estimate": sol.error_estimate, "time_correction": sol.time_correction}
+               "error_estimate": sol.error_estimate, "grid_estimate": sol.grid_estimate,
+               "time_estimate": sol.time_estimate, "time_correction": sol.time_correction}
     if args.phases:
         times = sol.phase_times(args.phases)
         results["phase_mean_energy"] = [{"t_phase": float(t), "value": float(v)}
@@ -216,9 +217,11 @@ def _run_forced(args, model, plan) -> int:
           f"period {sol.period:.10g}, {len(sol.times)} steps, {sol.iterations} period maps)")
     print(f"noise: {noise_assumption(model)['text']}")
     print(f"time-averaged E[H] = {sol.mean_energy:.8g}   impact rate = {sol.impact_rate:.8g}")
-    print(f"estimated L1 error of p(H | t) from the cells: {sol.error_estimate:.2g} (grid {tuple(grid)} against the "
-          f"grid twice coarser, same steps); time: Crank-Nicolson alone at {2 * len(sol.times)} steps is off by "
-          f"{sol.time_correction:.2g} (L1 of p(x, y)), a bound on the time error of the combination")
+    time_part = ("" if sol.time_estimate is None else
+                 f" + time steps {sol.time_estimate:.2g} (the grid twice coarser at {len(sol.times)} and at "
+                 f"{len(sol.times) // 2} steps, over 3)")
+    print(f"estimated L1 error of p(H | t), worst phase: {sol.error_estimate:.2g} = cells {sol.grid_estimate:.2g} "
+          f"(grid {tuple(grid)} against the grid twice coarser, over 3){time_part}")
     if args.phases:
         print("   phase   t_phase     E[H | t]     impact rate at t")
         for k, (t, e, r) in enumerate(zip(times, sol.mean_energy_at(times), sol.impact_rate_at(times))):

@@ -34,8 +34,10 @@ def register(subparsers) -> None:
                     "(the full (x, y) Fokker-Planck equation with impacts as boundary conditions, 0.1-2 s, on the "
                     "coarsest grid predicted to meet --tol, with its own three-grid error estimate; on Cartesian "
                     "cells for a potential with several wells, linear damping and additive noise, with a two-grid "
-                    "estimate, L1 then on [min G, h_max]); Monte Carlo only where none of these applies (forced "
-                    "models, several wells with nonlinear damping; dt and paths planned from the "
+                    "estimate, L1 then on [min G, h_max]); for a forced model the fpk of its periodic density "
+                    "(the time-averaged p(H); --phases N: each section's), for --filter ou the fpk on (x, y, eta), "
+                    "both with their own estimates; Monte Carlo only where none of these applies (forced "
+                    "models with several wells, several wells with nonlinear damping; dt and paths planned from the "
                     "scheme's bias constant and a pilot run). Runs the cheapest one predicted to meet --tol, then "
                     "reports the error estimated after the run and how it was made; when that misses --tol it "
                     "escalates (a finer fpk grid, or the next method). L1 is measured on 40 bins of [0, h_max].",
@@ -52,6 +54,14 @@ def register(subparsers) -> None:
                    help="wall-time budget of Monte Carlo in seconds (default 600)")
     p.add_argument("--seed", type=int, default=1,
                    help="root seed of the Monte Carlo pilot and runs (same seed, same numbers)")
+    p.add_argument("--filter", default=None, choices=("ou",),
+                   help="drive the model by Ornstein-Uhlenbeck (coloured) noise of the same intensity, bandwidth "
+                        "--param alpha=A (default 1): solved by the fpk on (x, y, eta), its grid refined while its "
+                        "two-grid estimate misses --tol")
+    p.add_argument("--phases", type=int, default=None, metavar="N",
+                   help="forced models: hold --tol for p(H | t) at each of the N phases k T / N (the worst), not "
+                        "only for the time-averaged p(H); with --out also write them (OUT with _phases, the "
+                        "columns of vibro mc --phases)")
     p.add_argument("--dry-run", action="store_true", help="only print the choice; compute nothing expensive")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="Monte Carlo progress bars; --no-progress: silent (default: bars on a terminal, otherwise "
@@ -74,13 +84,32 @@ def run(args) -> int:
     if args.out is not None:
         from .common import output_plan
 
-        output_plan(args).file(args.out, "--out", sidecar=True)
-    model = model_from_args(args)
-    print(f"model: {model!r}")
+        plan = output_plan(args)
+        plan.file(args.out, "--out", sidecar=True)
+        if args.phases:
+            from .common import beside
+
+            plan.file(beside(args.out, "phases"), "--out (its _phases file)")
+    if args.filter:
+        from .cmd_pdf import _filtered_model
+
+        model = _filtered_model(args)
+        if args.phases is not None:
+            raise ParameterError("--phases needs a forced model, not --filter")
+    else:
+        model = model_from_args(args)
+    if args.phases is not None and (args.phases < 1 or not getattr(model, "is_forced", False)):
+        raise ParameterError(f"--phases {args.phases}: give a number of phases >= 1, for a forced model")
+    osc = model.oscillator if args.filter else model
+    if args.filter:
+        alpha = model.resolve_parameters()[model.filter["parameters"]["alpha"]]
+        print(f"model: {osc!r} under an OU filter, alpha = {alpha:g}")
+    else:
+        print(f"model: {osc!r}")
     from vibro.provenance import noise_assumption
 
     print(f"noise: {noise_assumption(model)['text']}")
-    if not any(math.isfinite(v) for v in model.barriers):  # e.g. --param delta=inf: say what the inf means
+    if not any(math.isfinite(v) for v in osc.barriers):  # e.g. --param delta=inf: say what the inf means
         print("walls: none (barriers at infinity: no impacts)")
     if args.dry_run:
         if args.method != "auto":
@@ -89,7 +118,7 @@ def run(args) -> int:
         from vibro.solve import diagnose
 
         try:
-            diag = diagnose(model, args.h_max)
+            diag = None if args.filter else diagnose(model, args.h_max)
         except ModelError:  # no averaging (several wells, forcing): choose says what applies instead
             diag = None
         print(choose(model, args.tol, max_cost=args.max_cost, seed=args.seed, mc_pilot=False,
@@ -103,7 +132,7 @@ def run(args) -> int:
               f"{args.max_cost:g} s)", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     sol = solve(model, args.tol, method=args.method, max_cost=args.max_cost, seed=args.seed, h_max=args.h_max,
-                progress=mode == "bars")
+                progress=mode == "bars", phases=args.phases)
     if mode == "lines":
         print(f"vibro solve: {sol.method} done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     print(sol.summary())
@@ -127,6 +156,12 @@ def run(args) -> int:
 
         from .common import csv_text
 
+        phased = args.phases and sol.choice.settings.get("scheme") == "forced"
+        if phased:  # the sections, as vibro pdf --method fpk --phases writes them (before OUT: no partial pair)
+            from .common import beside
+
+            table = sol.result.phase_to_pandas(args.phases, {"H": (sol.edges[0], sol.edges[-1], len(sol.edges) - 1)})
+            phases_file = atomic_write_text(beside(args.out, "phases"), table.to_csv(index=False, float_format="%.17g"))
         path = atomic_write_text(args.out, csv_text({"H": sol.H, "p": sol.p}))
         results = {"method": sol.method, "reason": sol.choice.reason, "expected_error": sol.choice.expected_error,
                    "estimated_error": sol.estimated_error, "estimate_source": sol.estimate_source,
@@ -136,5 +171,5 @@ def run(args) -> int:
                     "forced_method": args.method,
                     **sol.choice.settings}
         side = write_sidecar(path, record("solve", model=model, settings=settings, results=results, started=t0))
-        print(f"wrote {path} and {side}")
+        print(f"wrote {path} and {side}" + (f" and {phases_file}" if phased else ""))
     return 0

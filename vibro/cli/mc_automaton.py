@@ -18,7 +18,6 @@ last histogram rows count the samples below and above the range. Every file is w
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -214,15 +213,14 @@ def scheme_for(args, automaton, oscillator: bool) -> str:
 def run(args, resolved, plan) -> int:
     """Simulate the automaton, print the summary, write the CSV files, the sidecar and ``--summary-json``."""
     import numpy as np
-    import pandas as pd
 
-    from hybrid.stochastic import atomic_write_text, simulate_automaton
+    from hybrid.stochastic import default_chunk_paths, simulate_automaton
     from hybrid.stochastic._auto_codegen import analyse
-    from hybrid.stochastic._runner import default_chunk_paths
     from models.automata import describe_automaton
-    from vibro.provenance import noise_assumption, record, write_sidecar
+    from vibro.provenance import noise_assumption, record
 
     from .density_check import check_observable_histogram
+    from .mc_outputs import common_results, transitions_frame, write_outputs
 
     automaton, params, base = resolved
     scheme = scheme_for(args, automaton, base is not None and not args.filter)
@@ -290,24 +288,14 @@ def run(args, resolved, plan) -> int:
             where = out if name == first else extra[name]
             check_observable_histogram(where, name, ens.density(name)[0], ens.counts[name][1:-1],
                                        ens.mean(name).value)
-    files = [out]
-    frame = _histogram_frame(ens, first)
-    atomic_write_text(out, frame.to_csv(index=False, float_format="%.17g"))
-    for name in names:
-        if name != first:
-            path = extra[name]
-            atomic_write_text(path, _histogram_frame(ens, name).to_csv(index=False, float_format="%.17g"))
-            files.append(path)
+    files = [(out, _histogram_frame(ens, first), None, None)]
+    files += [(extra[name], _histogram_frame(ens, name), name, None) for name in names if name != first]
     if ens.transitions:
-        path = extra["transitions"]
-        table = pd.DataFrame({"transition": list(ens.transitions), "firings": ens.events,
-                              "rate": [ens.rate(t) for t in ens.transitions]})
-        atomic_write_text(path, table.to_csv(index=False, float_format="%.17g"))
-        files.append(path)
+        files.append((extra["transitions"], transitions_frame(ens.transitions, ens.events,
+                                                              [ens.rate(t) for t in ens.transitions]),
+                      "transitions", None))
     if args.events:
-        path = extra["events"]
-        atomic_write_text(path, ens.events_to_pandas().to_csv(index=False, float_format="%.17g"))
-        files.append(path)
+        files.append((extra["events"], ens.events_to_pandas(), "events", None))
     snap = None
     if args.snapshots:
         from hybrid.stochastic._snapshots import snapshots_of
@@ -324,20 +312,9 @@ def run(args, resolved, plan) -> int:
                 print(f"vibro mc: warning: {len(unresolved)} of the {len(snap.times)} snapshot histograms of {name} "
                       f"do not resolve the density; the first: {unresolved[0].message}", file=sys.stderr)
         for name, frame in (("snapshots", snap.to_pandas()), ("snapshot_histograms", snap.histograms_to_pandas())):
-            path = extra[name]
-            atomic_write_text(path, frame.to_csv(index=False, float_format="%.17g"))
-            files.append(path)
+            files.append((extra[name], frame, name, None))
 
-    results = {"paths": args.paths, "samples": ens.flags["samples"], "wall_time": ens.wall_time,
-               "observables": {}, "rates": {t: ens.rate(t) for t in ens.transitions},
-               "firings": {t: int(k) for t, k in zip(ens.transitions, ens.events)},
-               "counters": {k: v for k, v in ens.flags.items() if k != "samples"}}
-    for name in names:
-        est = ens.mean(name)
-        results["observables"][name] = {"mean": est.value, "ci": est.ci, "outside": ens.outside_fraction(name)}
-    if "H" in names:
-        est = ens.mean("H")
-        results["mean_energy"] = {"value": est.value, "ci": est.ci}
+    results = common_results(ens)
     if args.events:  # first-passage times: the mean over the paths whose kept firings include the transition
         results["first_event_time"] = {}
         for t in ens.transitions:
@@ -358,11 +335,7 @@ def run(args, resolved, plan) -> int:
         description["oscillator"] = base
     rec = record("mc", model=_Described(description), settings=settings, results=results, started=started,
                  noise=noise_assumption(automaton))
-    write_sidecar(args.out, rec)
-    for path in files[1:]:  # every file written carries its provenance, saying which output it is
-        write_sidecar(path, {**rec, "output": Path(path).stem[len(out.stem) + 1:]})
-    if args.summary_json:
-        atomic_write_text(args.summary_json, json.dumps(rec, indent=1))
+    written = write_outputs(files, rec, args.summary_json)
 
     print(f"vibro mc: automaton {scheme} dt={args.dt:g} paths={args.paths} seed={args.seed} "
           f"states={[s.name for s in automaton.states]}")
@@ -381,7 +354,7 @@ def run(args, resolved, plan) -> int:
               f"{len(snap.times)} times:")
         for j in shown:
             print(f"    t = {snap.times[j]:<10.5g} {snap.mean(name, int(j)):.6g}")
-    print(f"  wrote {', '.join(str(f) for f in files)}")
+    print(f"  wrote {', '.join(str(f) for f in written)}")
     return 1 if ens.flags["outside"] else 0
 
 

@@ -266,6 +266,20 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     'exact'
     """
     check_request(tol, max_cost)
+    from models.excitation import FilteredAutomaton
+
+    if isinstance(model, FilteredAutomaton):
+        picked = coloured_choice(model, tol)
+        if isinstance(picked, str):
+            raise ModelError(f"no deterministic method applies to this filtered model ({picked}); solve's Monte Carlo "
+                             "takes oscillators only: use vibro mc (hybrid.stochastic.simulate_automaton)")
+        return picked
+    if getattr(model, "is_forced", False):
+        picked = forced_choice(model, tol)
+        if not isinstance(picked, str):
+            return picked
+        return mc_choice(model, tol, None, f"no deterministic method applies (forced model: {picked})", {}, max_cost,
+                         mc_pilot, seed)
     try:
         diag = diagnostics if diagnostics is not None else diagnose(model)
     except ModelError as exc:
@@ -310,6 +324,117 @@ def choose(model, tol: float = 0.02, *, max_cost: float = 600.0, diagnostics: Di
     why = "; ".join(reasons) + (f"; the phase-plane FPK solver (impacts as boundary conditions) on grid {grid} "
                                 "carries its own three-grid error estimate")
     return Choice("fpk", why, preds["fpk"], fpk_cost(grid), {"grid": grid}, preds, diag)
+
+
+FORCED_GRIDS = ((30, 60), (40, 80), (60, 120), (64, 128), (80, 160))
+"""The Cartesian grids (cells in x, cells in y) ``solve`` takes the forced fpk on, coarsest first."""
+FORCED_STEPS = (16, 32, 64, 128)
+"""The time steps per forcing period (the result's; Crank-Nicolson also runs twice as many) ``solve`` escalates."""
+COLOURED_GRIDS = ((24, 24, 12), (32, 32, 16), (48, 48, 24), (48, 48, 32), (48, 48, 48), (64, 64, 48))
+"""The grids (x, y, eta) ``solve`` takes the coloured fpk on, coarsest first (docs/results/fpk-coloured.md)."""
+
+
+def _first_meeting(ladder, predicted, tol):
+    """The first entry of ``ladder`` whose ``predicted`` L1 (a dict) is at most ``tol``, else the last."""
+    return next((g for g in ladder if predicted[g] <= tol), ladder[-1])
+
+
+def forced_choice(model, tol: float) -> Choice | str:
+    """fpk for a harmonically forced model (the periodic density, its time-averaged p(H)), or why not (a str).
+
+    The forced solver (:func:`averaging.phase_plane.periodic_density_xy`) applies to a forced single-well
+    oscillator with noise and a periodic forcing. Its estimate has two parts, measured after the run: the cells'
+    (the grid twice coarser) and the time steps' (half the steps); :func:`~vibro.solve.solve` refines the part that
+    misses. The start is predicted from example 08 (docs/results/fpk-forced.md): the cells' estimate is about
+    0.02 at (30, 60) and falls as the square of the cells; the time estimate is about 0.02, 0.005 and 0.0006 at 16,
+    32 and 64 steps. Each part gets half of ``tol``.
+
+    Examples
+    --------
+    >>> from models import ForcedDuffingImpact
+    >>> ch = forced_choice(ForcedDuffingImpact(), 0.05)
+    >>> ch.method, ch.settings["scheme"], ch.settings["grid"], ch.settings["steps"]
+    ('fpk', 'forced', (30, 60), 16)
+    """
+    from averaging.phase_plane.forced import unforced
+    from averaging.phase_plane.solver import is_single_well
+
+    if model.forcing_period is None:
+        return f"the forcing F = {model.forcing} has no period, so no periodic density"
+    free = unforced(model)
+    if not is_single_well(free):
+        return "the forced fpk needs a single-well potential"
+    if model.substitute(model.diffusion_squared) == 0:
+        return "the model has no noise"
+    grid_pred = {g: 0.02 * (30.0 / g[0]) ** 2 for g in FORCED_GRIDS}
+    time_pred = {16: 0.02, 32: 0.005, 64: 6e-4, 128: 4e-5}
+    grid = _first_meeting(FORCED_GRIDS, grid_pred, tol / 2.0)
+    steps = _first_meeting(FORCED_STEPS, time_pred, tol / 2.0)
+    from averaging.phase_plane.forced import BYTES_PER_CELL_FACTOR
+    from hybrid.sizes import MAX_MEMORY
+
+    def memory(g, k):  # the forced solver's own estimate (check included)
+        return g[0] * g[1] * BYTES_PER_CELL_FACTOR["cartesian"] * (k // 2 + 1) * 3 * 1.25
+
+    while memory(grid, steps) > MAX_MEMORY and grid != FORCED_GRIDS[0]:  # start where it fits; solve escalates
+        grid = FORCED_GRIDS[FORCED_GRIDS.index(grid) - 1]
+    expected = grid_pred[grid] + time_pred[steps]
+    why = (f"the model is forced (F = {model.forcing}): the averaging methods need a model without time dependence, "
+           f"so the phase-plane FPK solver of the periodic density (Cartesian cells {grid}, Crank-Nicolson at "
+           f"{steps} and {2 * steps} steps per period, combined) gives the time-averaged p(H), with its own estimate "
+           "of the cells' error (grid twice coarser) and of the time steps' (half the steps)")
+    preds = {"exact": math.inf, "paper": math.inf, "jump": math.inf, "chain": math.inf, "fpk": expected}
+    return Choice("fpk", why, expected, forced_cost(grid, steps),
+                  {"scheme": "forced", "grid": grid, "steps": steps}, preds, _no_diagnostics(4.0, "forced"))
+
+
+def forced_cost(grid, steps) -> float:
+    """Seconds of one forced fpk solve with its check: about 4e-5 s per cell and LU factor (K / 2 + 1 factors at K
+    steps, 3 runs of them, a quarter more for the check)."""
+    return 1.0 + 4e-5 * grid[0] * grid[1] * (steps // 2 + 1) * 3 * 1.3
+
+
+def coloured_choice(model, tol: float) -> Choice | str:
+    """fpk on (x, y, eta) for an OU-filtered model (:func:`averaging.phase_plane.stationary_density_coloured`), or
+    why not (a str: a band-pass filter's density is 4-D, a filter not built by ``ou_filter``).
+
+    The start is the coarsest grid of :data:`COLOURED_GRIDS` whose L1 against Monte Carlo on the benchmark of
+    docs/results/fpk-coloured.md was below half of ``tol``; the run's own two-grid estimate decides.
+
+    Examples
+    --------
+    >>> from models import DuffingImpact
+    >>> from models.excitation import ou_filter
+    >>> ch = coloured_choice(ou_filter(DuffingImpact(), alpha=1.0), 0.02)
+    >>> ch.method, ch.settings["scheme"], ch.settings["grid"]
+    ('fpk', 'coloured', (32, 32, 16))
+    """
+    from averaging.phase_plane.coloured import ALPHA_CHECKED, _parts
+
+    try:
+        _osc, alpha, *_ = _parts(model, None)
+    except ModelError as exc:
+        return str(exc)
+    if alpha > ALPHA_CHECKED:
+        return (f"alpha = {alpha:g} is above the bandwidths the coloured fpk was checked at ({ALPHA_CHECKED:g}): "
+                "the white-noise density (solve on the oscillator itself) approximates it")
+    measured = dict(zip(COLOURED_GRIDS, (0.0147, 0.0077, 0.0034, 0.0018, 0.0011, 0.0010)))
+    grid = _first_meeting(COLOURED_GRIDS, measured, tol / 2.0)
+    why = (f"the noise is OU-filtered (alpha = {alpha:g}): the phase-plane FPK solver on (x, y, eta) (grid {grid}) "
+           "gives the stationary p(H) of the (x, y)-marginal, with its own two-grid estimate")
+    preds = {"exact": math.inf, "paper": math.inf, "jump": math.inf, "chain": math.inf, "fpk": measured[grid]}
+    return Choice("fpk", why, measured[grid], coloured_cost(grid), {"scheme": "coloured", "grid": grid}, preds,
+                  _no_diagnostics(4.0, "coloured noise"))
+
+
+def coloured_cost(grid) -> float:
+    """Seconds of one coloured fpk solve with its check (about 2.5e-4 s per cell on 2 shared cores)."""
+    return 1.0 + 2.5e-4 * grid[0] * grid[1] * grid[2]
+
+
+def _no_diagnostics(h_max: float, what: str) -> Diagnostics:
+    return Diagnostics(True, True, False, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, h_max, math.nan,
+                       [f"{what}: no averaging"], geometry=what)
 
 
 def multiwell_choice(model, tol: float, why: str) -> Choice | None:

@@ -10,7 +10,11 @@
   ``fpk`` over its grids and Monte Carlo over run lengths on Example 1 with Ma's law, against ``fpk`` on a finer
   grid (its own estimate stated, and cross-checked by a converged Monte Carlo run);
 * ``workprecision_deterministic.csv`` / ``.png``: heyoka and scipy orbits over tolerances: error of the impact
-  times (against quadrature of the free quasi-period) and of delta H per impact (eq. 11), cost per impact.
+  times (against quadrature of the free quasi-period) and of delta H per impact (eq. 11), cost per impact;
+* ``workprecision_forced.csv`` / ``.png`` / ``.txt`` and ``workprecision_coloured...``: the forced fpk (periodic
+  density) and the coloured fpk (x, y, eta) over ladders of grids (and time steps), error against CPU time, on a
+  closed form (linear oscillators) and against the stored Monte Carlo of examples 08 and 10 (``--parts forced,
+  coloured``; the caption in the .txt).
 
 Every CSV has a ``method`` column and one row per (method, setting) with ``wall_time`` (s) and the errors.
 """
@@ -338,6 +342,144 @@ def deterministic_work_precision(quick: bool = True, progress=print):
     return pd.DataFrame(rows)
 
 
+# ----------------------------------------------------------------------------- forced and coloured fpk
+
+def _benchmark_module(name):
+    """A module of the repository's benchmarks/ (its stored Monte Carlo references), or None outside a checkout."""
+    import importlib
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    if not (root / "benchmarks" / f"{name}.py").exists():
+        return None
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    return importlib.import_module(f"benchmarks.{name}")
+
+
+def forced_work_precision(quick: bool = True, progress=print):
+    """The forced fpk (periodic density) over a ladder of cells and time steps: worst-phase L1 of p(H | t) against
+    CPU time (its check, the estimate's two extra solves, included).
+
+    Two cases: the linear oscillator without walls (x'' + 0.5 x' + x = 0.4 cos 1.3 t + xi, D = 0.05), against its
+    closed form (2 c H / D noncentral chi-square at every section; 8 phases, 40 bins of [0, 3]); and example 08's
+    forced Duffing impact oscillator (D = 0.02), against the stored Monte Carlo of ``vibro mc --phases 16``
+    (benchmarks/data/fpk_forced_mc.npz, 16 phases, 40 bins of [0, 4]), whose noise is stated in ``attrs``.
+    """
+    import pandas as pd
+    from scipy.stats import ncx2
+
+    from averaging.phase_plane.forced import periodic_density_xy
+    from models import ImpactOscillator
+
+    rows = []
+    c, A, W, D = 0.5, 0.4, 1.3, 0.05
+    lin = ImpactOscillator("x", "c*y", forcing="A*cos(W*t)", barriers=None,
+                           parameters={"c": c, "A": A, "W": W, "D": D})
+    z = A / (1.0 - W**2 + 1j * c * W)
+    edges = np.linspace(0.0, 3.0, L1_BINS + 1)
+    for K in ((16, 32) if quick else (16, 32, 64)):
+        for grid in ((16, 16), (24, 24), (32, 32)) + (() if quick else ((48, 48),)):
+            t0 = time.process_time()
+            sol = periodic_density_xy(lin, grid=grid, steps=K, h_max=3.0, phases=8, l1_tol=1.0)
+            cpu = time.process_time() - t0
+            worst = 0.0
+            for t, sec in zip(sol.phase_times(8), sol.sections(8)):
+                xp, yp = (z * np.exp(1j * W * t)).real, (1j * W * z * np.exp(1j * W * t)).real
+                exact = np.diff(ncx2.cdf(2.0 * edges * c / D, 2, (xp**2 + yp**2) * c / D))
+                worst = max(worst, float(np.abs(sec.bin_masses(edges) - exact).sum()))
+            rows.append(dict(case="linear", method=f"fpk forced, {K} + {2 * K} steps", setting=str(grid), steps=K,
+                             cpu_time=cpu, l1=worst, estimate=sol.error_estimate))
+            progress(f"  linear {grid} {K} steps: L1 {worst:.2e} (estimate {sol.error_estimate:.2e}) {cpu:.1f} s")
+    bench = _benchmark_module("fpk_forced")
+    noise = math.nan
+    if bench is not None:
+        mc_edges, ref, per_phase = bench.mc_reference("0.02")
+        noise = float(per_phase.max())
+        ladder = [((30, 60), 16), ((40, 80), 16), ((30, 60), 32), ((40, 80), 32)]
+        if not quick:
+            ladder += [((60, 120), 32), ((60, 120), 64), ((64, 128), 64)]
+        for grid, K in ladder:
+            t0 = time.process_time()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # its GridWarning at the coarse rungs is the point of the ladder
+                sol = bench.periodic_density_xy(bench.duffing(0.02), grid=grid, steps=K, h_max=4.0,
+                                                phases=bench.PHASES)
+            cpu = time.process_time() - t0
+            worst = max(float(np.abs(sec.bin_masses(mc_edges) - r).sum())
+                        for sec, r in zip(sol.sections(bench.PHASES), ref))
+            rows.append(dict(case="example 08", method=f"fpk forced, {K} + {2 * K} steps", setting=str(grid),
+                             steps=K, cpu_time=cpu, l1=worst, estimate=sol.error_estimate))
+            progress(f"  example 08 {grid} {K} steps: L1 {worst:.4f} (estimate {sol.error_estimate:.4f}) {cpu:.1f} s")
+    df = pd.DataFrame(rows)
+    df.attrs.update(mc_noise=noise)
+    return df
+
+
+def coloured_work_precision(quick: bool = True, progress=print):
+    """The coloured fpk on (x, y, eta) over a ladder of grids: L1 of p(H) against CPU time (the check's coarse
+    solve and the white-noise start included).
+
+    Two cases: the linear oscillator without walls under OU noise (c = 0.5, D = 0.25, alpha = 2), against the
+    Lyapunov Gaussian (40 bins of [0, 3]); and example 10's OU-filtered Duffing impact oscillator, against the
+    stored Monte Carlo (benchmarks/data/fpk_coloured_mc.npz: two seeds at dt = 0.01, 1.28e9 samples each; 60 bins
+    of [0, 3]), with the stored third run (dt = 0.005) as Monte Carlo's own point at its recorded CPU time.
+    """
+    import json
+
+    import pandas as pd
+    from scipy import linalg, special
+
+    from averaging.phase_plane.coloured import stationary_density_coloured
+    from models import ImpactOscillator
+    from models.excitation import ou_filter
+
+    rows = []
+    c, D, alpha = 0.5, 0.25, 2.0
+    lin = ou_filter(ImpactOscillator("x", "c*y", parameters={"c": c, "D": D}, barriers=None, name="linear"),
+                    alpha=alpha)
+    S = linalg.solve_continuous_lyapunov(np.array([[0.0, 1.0, 0.0], [-1.0, -c, 1.0], [0.0, 0.0, -alpha]]),
+                                         -np.diag([0.0, 0.0, 2 * alpha**2 * D]))
+    vx, vy = S[0, 0], S[1, 1]
+    a, b = 0.5 * (1 / vx + 1 / vy), 0.5 * (1 / vx - 1 / vy)
+    edges = np.linspace(0.0, 3.0, L1_BINS + 1)
+    exact = np.array([integrate.quad(lambda H: np.exp(-H * a) * special.i0(H * b) / np.sqrt(vx * vy), lo, hi)[0]
+                      for lo, hi in zip(edges[:-1], edges[1:])])
+    ladder = ((16, 16, 8), (24, 24, 12), (32, 32, 16)) + (() if quick else ((48, 48, 24), (48, 48, 32)))
+    for grid in ladder:
+        t0 = time.process_time()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sd = stationary_density_coloured(lin, grid=grid, h_max=3.0)
+        cpu = time.process_time() - t0
+        l1 = float(np.abs(sd.bin_masses(edges) - exact).sum())
+        rows.append(dict(case="linear", method="fpk coloured", setting=str(grid), cpu_time=cpu, l1=l1,
+                         estimate=sd.error_estimate))
+        progress(f"  linear {grid}: L1 {l1:.2e} (estimate {sd.error_estimate:.2e}) {cpu:.1f} s")
+    bench = _benchmark_module("fpk_coloured")
+    noise = math.nan
+    if bench is not None:
+        mc_edges, ref, noise = bench.mc_reference()
+        for grid in ladder:
+            t0 = time.process_time()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                sd = stationary_density_coloured(bench.model(), grid=grid)
+            cpu = time.process_time() - t0
+            l1 = float(np.abs(sd.bin_masses(mc_edges) - ref).sum())
+            rows.append(dict(case="example 10", method="fpk coloured", setting=str(grid), cpu_time=cpu, l1=l1,
+                             estimate=sd.error_estimate))
+            progress(f"  example 10 {grid}: L1 {l1:.4f} (estimate {sd.error_estimate:.4f}) {cpu:.1f} s")
+        data = np.load(bench.DATA)
+        info = json.loads(str(data["dt0.005_seed3_info"]))
+        run = bench._masses(data, "dt0.005_seed3")
+        rows.append(dict(case="example 10", method="Monte Carlo (stored run)", setting="dt 0.005, 1.28e9 samples",
+                         cpu_time=float(info["cpu_s"]), l1=float(np.abs(run - ref).sum()), estimate=math.nan))
+    df = pd.DataFrame(rows)
+    df.attrs.update(mc_noise=float(noise))
+    return df
+
+
 # ----------------------------------------------------------------------------- charts
 
 def _loglog(ax, x, y, label, band=None, marker="o", sort=True):
@@ -456,7 +598,79 @@ def plot_deterministic(df, path):
     plt.close(fig)
 
 
-def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "deterministic"), progress=print) -> dict:
+def fpk_caption(df, part: str) -> str:
+    """What the forced or coloured chart shows: axes, points, references and their accuracy.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"case": ["linear"], "cpu_time": [1.0], "l1": [1e-3]})
+    >>> df.attrs.update(mc_noise=0.002)
+    >>> "closed form" in fpk_caption(df, "forced")
+    True
+    """
+    noise = df.attrs.get("mc_noise", float("nan"))
+    if part == "forced":
+        return ("Each point: one run of the forced fpk (periodic density; Crank-Nicolson at K and 2K steps per "
+                "period, combined) on one grid of Cartesian cells (labels), its CPU time (process time, its error "
+                "estimate's two extra solves included) against the worst over the phases of the L1 of p(H | t) on 40 "
+                "bins; lines join the grids at one K; hollow markers: the run's own estimate. Left: the linear "
+                "oscillator without walls against its closed form (exact: every section Gaussian), 8 phases. Right: "
+                "example 08 (forced Duffing impact, D = 0.02) against the stored Monte Carlo of vibro mc --phases 16 "
+                f"(4 seeds x 384 000 samples per phase), whose noise, {noise:.4f} at the worst phase (dotted), "
+                "limits what is resolved; no Monte Carlo run time was stored, so it has no curve.")
+    return ("Each point: one run of the coloured fpk on (x, y, eta) at one grid (labels), its CPU time (process time, "
+            "the white-noise start and the check's coarse solve included) against the L1 of p(H). Left: the linear "
+            "oscillator without walls under OU noise (alpha = 2) against the Lyapunov Gaussian (exact), 40 bins. "
+            "Right: example 10 (OU-filtered Duffing impact, alpha = 1) against the stored Monte Carlo (2 seeds at "
+            f"dt = 0.01, 1.28e9 samples each; 60 bins), whose noise is {noise:.4f} (dotted); the square is the "
+            "stored third Monte Carlo run (dt = 0.005) at its recorded CPU time. Hollow markers: the fpk's own "
+            "two-grid estimate.")
+
+
+def plot_fpk(df, path, part: str):
+    """Two panels (closed form, example model) of L1 against CPU time for the forced or the coloured fpk."""
+    import textwrap
+
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = [c for c in ("linear", "example 08", "example 10") if c in set(df.case)]
+    fig, axes = plt.subplots(1, len(cases), figsize=(5.2 * len(cases), 4.6), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        g = df[df.case == case]
+        for method, h in g.groupby("method", sort=False):
+            h = h.sort_values("cpu_time")
+            if method.startswith("Monte"):
+                ax.loglog(h.cpu_time, h.l1, "s", color="k", label=method)
+                continue
+            (line,) = ax.loglog(h.cpu_time, h.l1, "o-", ms=4, label=method)
+            ax.loglog(h.cpu_time, h.estimate, "o", mfc="none", color=line.get_color(), ms=6)
+            for _, r in h.iterrows():
+                ax.annotate(r.setting, (r.cpu_time, r.l1), fontsize=5, xytext=(3, -6), textcoords="offset points")
+        noise = df.attrs.get("mc_noise")
+        if case != "linear" and noise and np.isfinite(noise):
+            ax.axhline(noise, color="grey", ls=":", lw=1, label="Monte Carlo reference's noise")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # minor labels overlap on a short decade
+        ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xlabel("CPU time of one run [s]")
+        ax.set_ylabel("L1 of p(H | t), worst phase" if part == "forced" else "L1 of p(H)")
+        ax.set_title(("closed form" if case == "linear" else f"{case}, against stored Monte Carlo"), fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=6)
+    fig.suptitle(f"{'Forced (harmonic + white noise)' if part == 'forced' else 'Coloured (OU) noise'} fpk: "
+                 "work-precision", fontsize=10)
+    fig.text(0.01, 0.01, "\n".join(textwrap.wrap(fpk_caption(df, part), 150)), fontsize=6, va="bottom")
+    fig.tight_layout(rect=(0, 0.13, 1, 1))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80))
+    plt.close(fig)
+
+
+def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "deterministic", "forced", "coloured"),
+                   progress=print) -> dict:
     """Run the work-precision benchmarks and write CSVs and PNGs into ``out_dir``.
 
     Parameters
@@ -464,7 +678,7 @@ def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "dete
     out_dir : path
     quick : bool
         Small sizes (a few minutes on 2 cores).
-    parts : sequence of {'mc', 'averaging', 'deterministic'}
+    parts : sequence of {'mc', 'averaging', 'deterministic', 'forced', 'coloured'}
     progress : callable
         Receives one line per run.
 
@@ -477,7 +691,9 @@ def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "dete
     out.mkdir(parents=True, exist_ok=True)
     results = {}
     runners = {"mc": (mc_work_precision, plot_mc), "averaging": (averaging_work_precision, plot_averaging),
-               "deterministic": (deterministic_work_precision, plot_deterministic)}
+               "deterministic": (deterministic_work_precision, plot_deterministic),
+               "forced": (forced_work_precision, lambda df, path: plot_fpk(df, path, "forced")),
+               "coloured": (coloured_work_precision, lambda df, path: plot_fpk(df, path, "coloured"))}
     for part in parts:
         if part not in runners:
             from hybrid.errors import ParameterError
@@ -490,11 +706,14 @@ def work_precision(out_dir, quick: bool = False, parts=("mc", "averaging", "dete
         plot(df, out / f"workprecision_{part}.png")
         if part == "averaging":  # the reference and its accuracy travel with the CSV (a DataFrame's attrs do not)
             atomic_write_text(out / "workprecision_averaging.txt", averaging_caption(df) + "\n")
+        if part in ("forced", "coloured"):
+            atomic_write_text(out / f"workprecision_{part}.txt", fpk_caption(df, part) + "\n")
         results[part] = df
     return results
 
 
 __all__ = [
-    "ElasticOracle", "averaging_work_precision", "deterministic_work_precision", "fit_bias_constants",
+    "ElasticOracle", "averaging_work_precision", "coloured_work_precision", "deterministic_work_precision",
+    "fit_bias_constants", "forced_work_precision",
     "free_quasi_period", "mc_work_precision", "reference_mc", "work_precision",
 ]
