@@ -236,6 +236,7 @@ def test_corrupt_kernel_cache_entry_is_rebuilt(tmp_path):
             "s = simulate_ensemble(DuffingImpact(), 'naive', dt=0.02, paths=2, t_end=5.0, t_burn=1.0, xy_bins=None)\n"
             "print(repr(s.mean_energy.value))\n")
     env = dict(os.environ, VIBRO_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT))
+    env.pop("NUMBA_CACHE_DIR", None)  # numba's entries next to the kernel, in tmp_path
     first = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=ROOT)
     assert first.returncode == 0, first.stderr[-2000:]
     entries = [p for p in tmp_path.rglob("*") if p.suffix in (".py", ".nbi", ".nbc")]
