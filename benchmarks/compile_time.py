@@ -1,6 +1,6 @@
 """Cold compile time of the Monte Carlo kernels named in issue 22, each in a fresh process with empty caches.
 
-    python benchmarks/compile_time.py            # the three kernels, 3 fresh processes each (about a minute)
+    python benchmarks/compile_time.py            # the three kernels, 3 fresh processes each (a few minutes)
     python benchmarks/compile_time.py --reps 1 --functions   # and each numba function's own compile time
     python benchmarks/compile_time.py --baseline main        # and the same in a ``git archive`` of main, interleaved
     python benchmarks/compile_time.py --baseline main --throughput   # and path-steps per CPU s of each kernel
