@@ -100,12 +100,11 @@ def test_device_module_is_the_generators_own_code(automaton, scheme):
     lay = _auto_cuda.layout(len(obs), 22, len(automaton.transitions), 100, (1, 1), 0)
     dev, st = _auto_cuda.generate_cuda_source(automaton, scheme, obs, lay=lay)
     cpu, _ = _auto_codegen.generate_source(automaton, scheme, obs)
-    for name in ("drift", "noise", "guard", "reset", "grate", "check", "crosses", "interpolate", "locate",
-                 "event_step", "outside"):
+    for name in ("model", "_observe", "crosses", "interpolate", "locate", "event_step", "outside"):
         assert _function(dev, name) == _function(cpu, name), name
     fast = cpu[cpu.index("                if mode == 0:"):cpu.index("                    _slow = True")]
     assert fast.count("\n") > 5 and fast in dev
-    assert "@nb.njit" not in dev and dev.count("@cuda.jit(device=True)") >= 11
+    assert "@nb.njit" not in dev and dev.count("@cuda.jit(device=True)") >= 7
     assert "cuda.atomic.add(vhist, best * VW + int(vb), 1)" in dev and "count(sh, gh, H_OFF + 0 * WIDTH" in dev
 
 

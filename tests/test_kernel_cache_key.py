@@ -11,7 +11,7 @@ import inspect
 import sympy as sp
 
 from hybrid import HybridAutomaton, Mode
-from hybrid.stochastic import _auto_codegen, _codegen
+from hybrid.stochastic import _auto_codegen, _kernel_modules
 
 
 def _changed_source(monkeypatch, module_name):
@@ -19,7 +19,7 @@ def _changed_source(monkeypatch, module_name):
     real = inspect.getsource
     monkeypatch.setattr(inspect, "getsource",
                         lambda obj: real(obj) + ("\n# changed\n" if obj.__name__ == module_name else ""))
-    _codegen._module_source_hash.cache_clear()
+    _kernel_modules._module_source_hash.cache_clear()
 
 
 def test_a_changed_random_number_generator_changes_the_automaton_kernel_key(monkeypatch):
@@ -33,7 +33,7 @@ def test_a_changed_random_number_generator_changes_the_automaton_kernel_key(monk
         assert _auto_codegen.kernel_key(src) != before
         assert _auto_codegen.source_hash(src) == text  # the source itself is the same text
     finally:
-        _codegen._module_source_hash.cache_clear()
+        _kernel_modules._module_source_hash.cache_clear()
 
 
 def test_a_changed_random_number_generator_changes_the_oscillator_kernel_name(monkeypatch):
@@ -48,4 +48,34 @@ def test_a_changed_random_number_generator_changes_the_oscillator_kernel_name(mo
         _changed_source(monkeypatch, "hybrid.stochastic._rng")
         assert _front.kernel_name(model, "symplectic", src)[0] != before
     finally:
-        _codegen._module_source_hash.cache_clear()
+        _kernel_modules._module_source_hash.cache_clear()
+
+
+def test_numba_settings_that_change_the_machine_code_change_the_kernel_key(monkeypatch):
+    # numba's cache index knows the CPU, not NUMBA_BOUNDSCHECK or NUMBA_OPT: a kernel compiled with bounds checks
+    # must not be loaded by a run without them (nor the other way round)
+    from numba.core import config
+
+    src = "from hybrid.stochastic._rng import next_normal"
+    before = _auto_codegen.kernel_key(src)
+    monkeypatch.setattr(config, "BOUNDSCHECK", True)
+    checked = _auto_codegen.kernel_key(src)
+    monkeypatch.setattr(config, "OPT", 0)
+    assert len({before, checked, _auto_codegen.kernel_key(src)}) == 3
+
+
+def test_a_callable_law_names_its_kernel_by_its_code_not_by_the_function_object():
+    from hybrid.stochastic import _front
+    from models import CustomRestitution, DuffingImpact
+
+    def names(*laws):
+        return [_front.kernel_name(DuffingImpact(restitution=CustomRestitution(law)), "symplectic", "src")[0]
+                for law in laws]
+
+    def law(v):
+        return 0.7 + 0.0 * v
+
+    twin = eval(compile("lambda v: 0.7 + 0.0 * v", "<law>", "eval"))  # another object, the same code and constants
+    other = eval(compile("lambda v: 0.8 + 0.0 * v", "<law>", "eval"))
+    a, b, c = names(law, twin, other)
+    assert a == b != c and a.startswith(names(other)[0][:-32])

@@ -81,9 +81,11 @@ _BOUNDSCHECK = textwrap.dedent("""
 """)
 
 
-def test_kernels_run_under_numba_boundscheck(tmp_path):
-    # a fresh kernel cache: numba compiles with bounds checks, so any index out of range raises IndexError
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", VIBRO_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
+def test_kernels_run_under_numba_boundscheck():
+    # numba compiles with bounds checks, so any index out of range raises IndexError; the kernels' names carry
+    # NUMBA_BOUNDSCHECK (kernel_key), so the shared kernel cache keeps them apart from the unchecked ones and a
+    # second run of the suite loads them instead of compiling them again
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", PYTHONPATH=str(ROOT))
     res = subprocess.run([sys.executable, "-c", _BOUNDSCHECK], capture_output=True, text=True, env=env, cwd=ROOT,
                          timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
@@ -164,9 +166,30 @@ def test_resume_with_another_callable_law_is_refused(tmp_path, caplog):
     assert not [r for r in caplog.records if r.name == "hybrid.stochastic.compile"]
     # the same law (another function object with the same code and constants) resumes
     same = eval(compile("lambda v: 0.9 + 0.0 * v", "<law>", "eval"))
+    caplog.clear()
     s = simulate_ensemble(DuffingImpact(restitution=CustomRestitution(same)), "milstein", checkpoint=tmp_path,
                           resume=True, **KW)
     assert s.paths == 8
+    # ... with law a's kernel: a callable law's kernel is named by the law's digest, not by the function object
+    assert not [r for r in caplog.records if r.name == "hybrid.stochastic.compile"]
+    # and cached on disk like an expression law's: another process loads it (no compile)
+    code = _LAW_KERNEL_CACHED.format(tests=str(ROOT / "tests"), checkpoint=str(tmp_path / "again"), kw=KW)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                         env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.split()[-2:] == ["1", "0"], res.stdout  # cache hits, misses of run_chunk
+
+
+_LAW_KERNEL_CACHED = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})  # numba's cache entry refers to the law's module: it must be importable
+    from hybrid.stochastic import _front, simulate_ensemble
+    from models import CustomRestitution, DuffingImpact
+    model = DuffingImpact(restitution=CustomRestitution(eval(compile("lambda v: 0.9 + 0.0 * v", "<law>", "eval"))))
+    simulate_ensemble(model, "milstein", checkpoint={checkpoint!r}, **{kw!r})
+    stats = _front.kernel_module(model, "milstein")[0].run_chunk.stats
+    print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+""")
 
 
 def test_a_law_reading_an_unhashable_object_cannot_be_checkpointed(tmp_path):
@@ -213,6 +236,7 @@ def test_corrupt_kernel_cache_entry_is_rebuilt(tmp_path):
             "s = simulate_ensemble(DuffingImpact(), 'naive', dt=0.02, paths=2, t_end=5.0, t_burn=1.0, xy_bins=None)\n"
             "print(repr(s.mean_energy.value))\n")
     env = dict(os.environ, VIBRO_CACHE_DIR=str(tmp_path), PYTHONPATH=str(ROOT))
+    env.pop("NUMBA_CACHE_DIR", None)  # numba's entries next to the kernel, in tmp_path
     first = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=ROOT)
     assert first.returncode == 0, first.stderr[-2000:]
     entries = [p for p in tmp_path.rglob("*") if p.suffix in (".py", ".nbi", ".nbc")]

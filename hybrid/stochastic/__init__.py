@@ -41,8 +41,8 @@ Examples
 """
 
 from ._auto_exec import default_chunk_paths
-from ._codegen import cache_dir
 from ._front import Kernel, build_kernel, generate_source
+from ._kernel_modules import cache_dir
 from ._problem import ChatteringWarning, EnsembleProblem, Execution, MonteCarloAlgorithm, StepSizeWarning
 from ._rng import chunk_states, normals, ziggurat_tables
 from ._runner import check_step, drive_paths, sample_paths, simulate_ensemble, solve_ensemble, speed_scale

@@ -1,8 +1,10 @@
 """Numba source for Monte Carlo of any :class:`~hybrid.automaton.HybridAutomaton` with noise.
 
 The automaton's sympy expressions (Itô drift, noise matrix, guards, resets, checks, observables, the guards' rates
-of change along the drift) become numba functions of ``(which, x, t, p)``, one per kind with a branch per mode or
-transition. Parameter values are not in the source (they arrive as the array ``p``), so changing a parameter never
+of change along the drift) become one numba function ``model(kind, which, x, t, p, out)`` with a branch per kind
+(only the kinds the scheme calls) and, in it, per mode or transition (numba compiles each function on its own, so one
+function for all of them compiles once, not nine times); the observables are ``_observe``. Parameter values are not
+in the source (they arrive as the array ``p``), so changing a parameter never
 recompiles. The scheme is a constant of the generated module, so only its own code is compiled. The source is
 cached on disk by its hash (:func:`kernel_key`).
 
@@ -45,7 +47,7 @@ import sympy as sp
 from hybrid.automaton import real_symbol
 from hybrid.errors import ModelError
 
-from ._codegen import _Printer
+from ._kernel_modules import _Printer
 
 TEMPLATE_VERSION = "6"
 SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4, "naive": 5}
@@ -235,25 +237,33 @@ class _Names:
         return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(body), "    ") + "\n"
 
 
-    def dispatch(self, name: str, cases: list, target: str | None, default: str = "0.0") -> str:
-        """One numba function ``name(_which, x, t, p[, out])`` whose branch ``k`` computes ``cases[k]`` (a list
-        of expressions; common sub-expressions once per branch). One function per kind, not one per mode or
-        transition: numba compiles each function separately, and the count dominates the compile time."""
+    def model(self, kinds: list) -> str:
+        """One numba function ``model(_kind, _which, x, t, p, out)`` for all the model's functions: ``kinds`` holds
+        ``(name, cases, writes)`` per kind (``F_<name>`` selects it), whose branch ``k`` computes ``cases[k]`` (a list
+        of expressions; common sub-expressions once per branch) into ``out`` (``writes``) or as the return value
+        (a check returns 1.0 or 0.0). One function, not one per kind: numba compiles each function on its own,
+        at 0.1 - 0.3 s apiece, however small (measured in docs/results/compile-time.md)."""
         lines = self.unpack()
-        for k, outputs in enumerate(cases):
-            exprs = [sp.sympify(e).xreplace(self.subs) for e in outputs]
-            reps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols(f"_c{k}_"))
-            body = [f"{s} = {self.printer.doprint(e)}" for s, e in reps]
-            if target is None:
-                body.append(f"return {self.printer.doprint(reduced[0])}")
-            else:
-                body += [f"{target}[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
-            lines.append(f"{'if' if k == 0 else 'elif'} _which == {k}:")
-            lines.append(textwrap.indent("\n".join(body) or "pass", "    "))
-        if target is None:
-            lines.append(f"return {default}")
-        sig = f"def {name}(_which, x, t, p):" if target is None else f"def {name}(_which, x, t, p, {target}):"
-        return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(lines), "    ") + "\n"
+        for kk, (kind, cases, writes) in enumerate(kinds):
+            branch = []
+            for k, outputs in enumerate(cases):
+                exprs = [sp.sympify(e).xreplace(self.subs) for e in outputs]
+                reps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols(f"_c{kk}_{k}_"))
+                body = [f"{s} = {self.printer.doprint(e)}" for s, e in reps]
+                if not writes:
+                    e = self.printer.doprint(reduced[0])
+                    body.append(f"return 1.0 if {e} else 0.0" if kind == "CHECK" else f"return {e}")
+                else:
+                    body += [f"out[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
+                branch.append(f"{'if' if k == 0 else 'elif'} _which == {k}:")
+                branch.append(textwrap.indent("\n".join(body) or "pass", "    "))
+            if kind == "CHECK":
+                branch.append("return 1.0")
+            lines.append(f"{'if' if kk == 0 else 'elif'} _kind == F_{kind}:")
+            lines.append(textwrap.indent("\n".join(branch) or "pass", "    "))
+        lines.append("return 0.0")
+        return ("@nb.njit(cache=CACHE)\ndef model(_kind, _which, x, t, p, out):\n"
+                + textwrap.indent("\n".join(lines), "    ") + "\n")
 
 
 def ou_parts(st: AutomatonStructure, k: int) -> list:
@@ -466,26 +476,27 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         src_mode = st.modes.index(tr.source)
         rates.append(sum(sp.diff(tr.guard, xs[i]) * st.drift[src_mode][i] for i in range(n))
                      + sp.diff(tr.guard, TIME))
-    trs = st.transitions
-    funcs = [
-        names.dispatch("drift", [list(f) for f in st.drift], "out"),
-        names.dispatch("noise", [list(G) for G in st.noise], "out"),  # row-major n x m
-        names.dispatch("lgn", lgns, "out"),
-        names.dispatch("guard", [[tr.guard] for tr in trs], None),
-        names.dispatch("reset", [list(tr.reset) for tr in trs], "out"),
-        names.dispatch("grate", [[r] for r in rates], None),
-        names.dispatch("check", [[tr.check if tr.check is not None else sp.true] for tr in trs], None, "True"),
-    ]
-    # BAOAB's force and damping rate per velocity (zeros for the other schemes: their code never calls these)
+    # BAOAB's force and damping rate per velocity
     parts = [ou_parts(st, k) if scheme == "baoab" else [] for k in range(len(st.modes))]
-    force, damping = [], []
-    for k in range(len(st.modes)):
-        fk, ck = [sp.Integer(0)] * n, [sp.Integer(0)] * n
-        for v, F, c in parts[k]:
-            fk[v], ck[v] = F, c
-        force.append(fk)
-        damping.append(ck)
-    funcs += [names.dispatch("bforce", force, "out"), names.dispatch("odamp", damping, "out")]
+    kinds = [("DRIFT", [list(f) for f in st.drift], True),
+             ("NOISE", [list(G) for G in st.noise], True)]  # row-major n x m
+    if scheme in ("milstein", "symplectic"):  # only the kinds the scheme's code calls
+        kinds.append(("LGN", lgns, True))
+    trs = st.transitions
+    kinds += [("GUARD", [[tr.guard] for tr in trs], False),
+              ("RESET", [list(tr.reset) for tr in trs], True),
+              ("GRATE", [[r] for r in rates], False),
+              ("CHECK", [[tr.check if tr.check is not None else sp.true] for tr in trs], False)]
+    if scheme == "baoab":
+        force, damping = [], []
+        for k in range(len(st.modes)):
+            fk, ck = [sp.Integer(0)] * n, [sp.Integer(0)] * n
+            for v, F, c in parts[k]:
+                fk[v], ck[v] = F, c
+            force.append(fk)
+            damping.append(ck)
+        kinds += [("BFORCE", force, True), ("ODAMP", damping, True)]
+    funcs = [names.model(kinds)]
     obs = list(observables.values())
     funcs.append(names.function("_observe", obs if obs else [sp.Integer(0)], "out"))
     # the splitting schemes move the velocities in sub-steps of their own (kicks, noise, BAOAB's O step) at a fixed
@@ -640,16 +651,26 @@ def source_hash(src: str) -> str:
 
 def kernel_key(src: str) -> str:
     """The kernel's cache key: its source, the source of every project module it imports (the random-number
-    generator, shared helpers: numba's disk cache does not look at them) and the numba and numpy versions.
+    generator, shared helpers: numba's disk cache does not look at them), the numba, llvmlite, numpy and Python
+    versions, and the numba settings that change the machine code but not numba's own cache index
+    (``NUMBA_OPT``, ``NUMBA_BOUNDSCHECK``, ``NUMBA_DEBUGINFO``): a kernel compiled with bounds checks is not loaded by
+    a run without them, nor the other way round.
 
     Examples
     --------
     >>> len(kernel_key("import math"))
     16
     """
-    from ._codegen import dependency_hash
+    import sys
 
-    return hashlib.sha256((source_hash(src) + dependency_hash(src)).encode()).hexdigest()[:16]
+    import llvmlite
+    from numba.core import config
+
+    from ._kernel_modules import dependency_hash
+
+    settings = f"{llvmlite.__version__} {sys.version_info[:2]} {config.OPT} {config.BOUNDSCHECK} " \
+               f"{config.DEBUGINFO_DEFAULT}"
+    return hashlib.sha256((source_hash(src) + dependency_hash(src) + settings).encode()).hexdigest()[:16]
 
 
 _TEMPLATE_HEAD = '''\
@@ -689,6 +710,8 @@ FW_GSTAT = N_TRANS + 1
 FW = N_TRANS + 1 + 4 * N_TRANS
 FAST_CHECKS_SET = {fast_checks_set}
 SCHEME = {scheme_code}
+# model()'s kinds (np.int64, not literals: numba compiles one model() for all of them)
+F_DRIFT, F_NOISE, F_LGN, F_GUARD, F_RESET, F_GRATE, F_CHECK, F_BFORCE, F_ODAMP = [np.int64(k) for k in range(9)]
 
 
 {funcs}
@@ -738,7 +761,7 @@ def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
         if not (s > a and s < b):
             s = 0.5 * (a + b)
         interpolate(xa, va, xb, s, dt, free_flight, xs)
-        fs = guard(j, xs, t0 + s * dt, p)
+        fs = model(F_GUARD, j, xs, t0 + s * dt, p, xs)
         if fs == 0.0 or (b - a) < 1e-13:
             break
         if (fs < 0.0) == (fa < 0.0):
@@ -793,15 +816,15 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
                 for k in range(N_POS):
                     xb[POS[k]] = xa[POS[k]] + tau * xa[VEL[k]]
             else:
-                drift(mode, xa, t, p, f)
-                noise(mode, xa, t, p, G)
+                model(F_DRIFT, mode, xa, t, p, f)
+                model(F_NOISE, mode, xa, t, p, G)
                 for i in range(N):
                     acc = f[i] * tau
                     for k in range(M):
                         acc += G[i * M + k] * dw[k] * frac
                     xb[i] = xa[i] + acc
                 if SCHEME == 1:
-                    lgn(mode, xa, t, p, L)
+                    model(F_LGN, mode, xa, t, p, L)
                     for i in range(N):
                         acc = 0.0
                         for jn in range(M):
@@ -816,8 +839,8 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
             best_s = 2.0
             for jj in range(COUNT[mode]):
                 j = FIRST[mode] + jj
-                g0 = guard(j, xa, t, p)
-                g1 = guard(j, xb, t + tau, p)
+                g0 = model(F_GUARD, j, xa, t, p, xa)
+                g1 = model(F_GUARD, j, xb, t + tau, p, xb)
                 if track:
                     dg = g1 - g0
                     gs = FW_GSTAT + 4 * j
@@ -971,7 +994,7 @@ def outside(mode, x, t, p):
     for jj in range(COUNT[mode]):
         j = FIRST[mode] + jj
         if SELF_LOOP[j] == 1:
-            gj = guard(j, x, t, p)
+            gj = model(F_GUARD, j, x, t, p, x)
             if (DIRECTION[j] > 0 and gj > 1e-9) or (DIRECTION[j] < 0 and gj < -1e-9):
                 return True
     return False
@@ -1122,9 +1145,9 @@ may have fired), shared by ``run_chunk`` and ``record_chunk``: a recorded path i
 # the closing noise and kick), as they are where no guard depends on a velocity (no crossing can happen in them), and
 # the firing of a transition (shared with velocity_leg)
 _MILSTEIN_VELOCITIES = """\
-drift(mode, {state}, t, p, f)
-noise(mode, {state}, t, p, G)
-lgn(mode, {state}, t, p, L)
+model(F_DRIFT, mode, {state}, t, p, f)
+model(F_NOISE, mode, {state}, t, p, G)
+model(F_LGN, mode, {state}, t, p, L)
 for kv in range(N_POS):
     i = VEL[kv]
     acc = f[i] * dt
@@ -1144,12 +1167,12 @@ and once for the located velocity sub-step."""
 _PLAIN_OPENING = """\
 if SCHEME == 2:
     # kick: velocities by half the drift
-    drift(mode, x, t, p, f)
+    model(F_DRIFT, mode, x, t, p, f)
     for k in range(N_POS):
         x[VEL[k]] += 0.5 * dt * f[VEL[k]]
 elif SCHEME == 4:
     # BAOAB: kick by the force (the drift without its damping); half flight, O, half flight below; kick
-    bforce(mode, x, t, p, f)
+    model(F_BFORCE, mode, x, t, p, f)
     for k in range(N_POS):
         x[VEL[k]] += 0.5 * dt * f[VEL[k]]
 elif SCHEME == 3:
@@ -1162,8 +1185,8 @@ n_ev = 0"""
 
 _NAIVE_OPENING = """\
 # naive: the velocities' Euler-Maruyama step first (drift and noise at the start)
-drift(mode, x, t, p, f)
-noise(mode, x, t, p, G)
+model(F_DRIFT, mode, x, t, p, f)
+model(F_NOISE, mode, x, t, p, G)
 for kv in range(N_POS):
     i = VEL[kv]
     acc = f[i] * dt
@@ -1178,8 +1201,8 @@ frac = 0.0  # naive: the rest of the step's flight is dropped (the event time is
 
 
 _FIRE = """\
-speed = abs(grate(best, xs, {when}, p))
-if not check(best, xs, {when}, p):
+speed = abs(model(F_GRATE, best, xs, {when}, p, xs))
+if model(F_CHECK, best, xs, {when}, p, xs) == 0.0:
     # the transition's declared condition fails (an impact with e outside (0, 1]): counted, first speed kept
     if iw[5] == 0:
         fw[FW_FBAD] = speed
@@ -1198,15 +1221,15 @@ if rec:
         vhist[best, int(vb)] += 1
     else:
         vhist[best, v_bins] += 1
-reset(best, xs, {when}, p, xr)
+model(F_RESET, best, xs, {when}, p, xr)
 for i in range(N):
     x[i] = xr[i]
 mode = TARGET[best]"""
 
 
 _O_STEP = """\
-odamp(mode, {state}, t, p, f)
-noise(mode, {state}, t, p, G)
+model(F_ODAMP, mode, {state}, t, p, f)
+model(F_NOISE, mode, {state}, t, p, G)
 for kv in range(N_POS):
     i = VEL[kv]
     kd = f[i] * dt
@@ -1228,17 +1251,17 @@ _PLAIN_O_STEP = _O_STEP.format(state="x", store="x[i] = a * x[i] + c * acc")
 _PLAIN_CLOSING = """\
 if SCHEME == 2:
     # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
-    noise(mode, x, t_end, p, G)
+    model(F_NOISE, mode, x, t_end, p, G)
     for i in range(N):
         acc = 0.0
         for k in range(M):
             acc += G[i * M + k] * dw[k]
         x[i] += acc
-    drift(mode, x, t_end, p, f)
+    model(F_DRIFT, mode, x, t_end, p, f)
     for k in range(N_POS):
         x[VEL[k]] += 0.5 * dt * f[VEL[k]]
 elif SCHEME == 4:
-    bforce(mode, x, t_end, p, f)
+    model(F_BFORCE, mode, x, t_end, p, f)
     for k in range(N_POS):
         x[VEL[k]] += 0.5 * dt * f[VEL[k]]"""
 
@@ -1308,11 +1331,11 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
         # outside: numba compiles only the scheme's own sub-steps, and their callees)
         if SCHEME == 2:
             if kind == KICK:
-                drift(mode, xa, t, p, f)
+                model(F_DRIFT, mode, xa, t, p, f)
                 for k in range(N_POS):
                     xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
             else:
-                noise(mode, xa, t, p, G)
+                model(F_NOISE, mode, xa, t, p, G)
                 for i in range(N):
                     acc = 0.0
                     for k in range(M):
@@ -1321,7 +1344,7 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
         elif SCHEME == 3:
 ''' + textwrap.indent(_MILSTEIN_VELOCITIES.format(state="xa", store="xb[i] += acc"), " " * 12) + '''
         elif kind == FORCE_KICK:
-            bforce(mode, xa, t, p, f)
+            model(F_BFORCE, mode, xa, t, p, f)
             for k in range(N_POS):
                 xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
         else:
@@ -1337,8 +1360,8 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
             j = FIRST[mode] + jj
             if VGUARD[j] == 0:  # a guard of the positions and time only: not moved by this sub-step
                 continue
-            g0 = guard(j, xa, t, p)
-            g1 = guard(j, xb, t, p)
+            g0 = model(F_GUARD, j, xa, t, p, xa)
+            g1 = model(F_GUARD, j, xb, t, p, xb)
             if crosses(DIRECTION[j], g0, g1):
                 sj = locate(j, xa, xa, xb, t, 0.0, p, straight, g0, g1, xs)
                 if sj < best_s:

@@ -41,7 +41,7 @@ import numpy as np
 
 from hybrid.errors import CudaUnavailableError, ModelError, ParameterError
 
-from . import _auto_codegen, _auto_exec, _codegen, _cuda_rng
+from . import _auto_codegen, _auto_exec, _cuda_rng, _kernel_modules
 
 RNG = "philox4x32-10 box-muller, counter (step*M+k)//2, path"
 PRECISIONS = ("f64", "f32")
@@ -422,7 +422,7 @@ class CudaRun:
         self.source, self.n = src, len(st.states)
         where = "sim" if sim else "dev"
         self.name = f"vibro_auto_cuda_{scheme}_{precision}_{where}_{_auto_codegen.kernel_key(src)}"
-        self.module, _ = _codegen.load_source(self.name, src, label=f"automaton/{scheme} (CUDA, {precision})")
+        self.module, _ = _kernel_modules.load_source(self.name, src, label=f"automaton/{scheme} (CUDA, {precision})")
         self.key = _cuda_rng.seed_key(seed)
         ft = self.ft
         self.scalars = (ft(a["dt"]), ft(0.0), a["p"].astype(ft), a["obs_lo"].astype(ft), a["obs_scale"].astype(ft),
@@ -612,7 +612,7 @@ def kernel_resources(settings: dict) -> dict:
     cuda = require_cuda()
     if simulator_enabled():
         raise CudaUnavailableError("kernel_resources needs a GPU: the simulator compiles no kernel")
-    module = _codegen._LOADED.get(settings.get("cuda_kernel"))
+    module = _kernel_modules._LOADED.get(settings.get("cuda_kernel"))
     if module is None:
         raise ParameterError("kernel_resources: the ensemble's CUDA kernel was not run in this process")
     kernel = module.advance
@@ -665,7 +665,8 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
     lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
     src, _ = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
                                   cache=False)
-    module, _ = _codegen.load_source(f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}", src)
+    name = f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}"
+    module, _ = _kernel_modules.load_source(name, src)
     from numba.cuda import dispatcher
 
     # numba-cuda compiles a kernel's device functions for the current device's compute capability; without a device

@@ -33,7 +33,7 @@ import numpy as np
 from hybrid.errors import CheckpointError, ParameterError
 from hybrid.io import atomic_write
 
-from . import _codegen, _rng
+from . import _kernel_modules, _rng
 
 CHECKPOINT_FILE = "automaton_checkpoint.npz"
 """The checkpoint of an automaton ensemble (per-chunk rows) or of a CUDA run (per-path state)."""
@@ -211,11 +211,11 @@ class AutomatonJob:
     def __init__(self, name: str, src: str, args: dict, npaths: np.ndarray, shapes: dict, label: str | None = None,
                  user_law=None):
         self.name, self.src, self.args, self.npaths, self.shapes = name, src, args, npaths, shapes
-        self.label = label  # the kernel's name in the compile notice (hybrid.stochastic._codegen.COMPILE_LOG)
+        self.label = label  # the kernel's name in the compile notice (hybrid.stochastic._kernel_modules.COMPILE_LOG)
         self.user_law = user_law  # a numba-compiled restitution callable: the module is built in memory
 
     def module(self):
-        module, _ = _codegen.load_source(self.name, self.src, getattr(self, "user_law", None),
+        module, _ = _kernel_modules.load_source(self.name, self.src, getattr(self, "user_law", None),
                                          label=getattr(self, "label", None))
         return module
 

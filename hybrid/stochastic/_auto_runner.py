@@ -24,7 +24,7 @@ from hybrid.sizes import check_limit, check_size
 
 from . import _auto_codegen, _auto_exec, _rng
 from ._auto_exec import COUNT_NAMES, check_chunk_count, default_chunk_paths
-from ._codegen import load_source
+from ._kernel_modules import load_source
 from ._problem import CHATTER_IMPACTS_PER_STEP, MAX_PATH_STEPS, ChatteringWarning, StepSizeWarning, positive_int
 from ._statistics import Estimate, joint_frame, ratio_estimate
 

@@ -32,7 +32,7 @@ import sympy as sp
 from hybrid.automaton import real_symbol
 from hybrid.errors import ModelError, ParameterError
 
-from . import _auto_codegen, _auto_exec, _codegen, _rng
+from . import _auto_codegen, _auto_exec, _kernel_modules, _rng
 from ._statistics import COUNTS, SUMS
 
 KERNELS = ("auto", "automaton")
@@ -79,7 +79,7 @@ def kernel_module(model, scheme: str):
     auto_scheme = AUTOMATON_SCHEME_OF[scheme]
     automaton, _, src, st = _generated(model, auto_scheme)
     name, user_law = kernel_name(model, auto_scheme, src)
-    module, _ = _codegen.load_source(name, src, user_law, label=f"{model.name}/{auto_scheme}")
+    module, _ = _kernel_modules.load_source(name, src, user_law, label=f"{model.name}/{auto_scheme}")
     return module, np.array([automaton.parameters[k] for k in st.params], dtype=float)
 
 
@@ -100,7 +100,7 @@ def generate_source(model, scheme, cache: bool = True) -> tuple[str, tuple[float
     from ._schemes import get_scheme
 
     sch = get_scheme(scheme)
-    _codegen.refuse_forced(model)
+    _kernel_modules.refuse_forced(model)
     check_model(model, sch)
     automaton, _, src, _ = _generated(model, AUTOMATON_SCHEME_OF[sch.name])
     _, user_law = kernel_name(model, AUTOMATON_SCHEME_OF[sch.name], src)
@@ -261,8 +261,8 @@ def _job(model, settings: dict, h_scale: float, v_scale: float, xy_scales: tuple
     # the law's numbers in full precision (they are parameters of the kernel, not in its source); a callable's code
     fn = getattr(model.restitution, "callable", None)
     law = ([float.hex(float(v)) for k, v in automaton.parameters.items() if k.startswith("_law")] if fn is None
-           else [_codegen.callable_digest(fn)])
-    key = hashlib.sha256((src + _codegen.dependency_hash(src)).encode()).hexdigest()[:32]
+           else [_kernel_modules.callable_digest(fn)])
+    key = hashlib.sha256((src + _kernel_modules.dependency_hash(src)).encode()).hexdigest()[:32]
     identity = {"kernel": key, "law": [model.restitution.spec(), *law]}
     return AutomatonChunks(job, s, model.restitution, tuple(t.name for t in st.transitions)), identity
 
@@ -317,7 +317,7 @@ _USER_LAWS: dict[int, object] = {}  # keeps user callables alive, so the id in a
 
 def kernel_name(model, scheme: str, src: str) -> tuple[str, object | None]:
     """The module name of the automaton kernel ``src`` and, for a restitution law given as a Python callable, the
-    callable compiled by numba (the module is then built in memory, its name carrying the callable's id).
+    callable compiled by numba (the module's name then carries the callable's digest, or its id where it has none).
 
     The source of such a kernel calls ``_user_law`` and is the same for every callable law, as the source of an
     expression law is the same for every value of its numbers; the module binds the compiled callable.
@@ -326,17 +326,17 @@ def kernel_name(model, scheme: str, src: str) -> tuple[str, object | None]:
     fn = getattr(model.restitution, "callable", None)
     if fn is None:
         return name, None
-    _, _, jitted = _codegen._law_code(model.restitution)  # a one-line RestitutionError where numba cannot
+    _, _, jitted = _kernel_modules._law_code(model.restitution)  # a one-line RestitutionError where numba cannot
     _USER_LAWS.setdefault(id(fn), fn)
-    return f"{name}_law{id(fn):x}", jitted
+    return f"{name}_law{_kernel_modules.callable_digest(fn) or format(id(fn), 'x')}", jitted
 
 
 def with_user_law(automaton):
     """``automaton`` with the walls' numerical reset (a callable restitution law) made symbolic: y -> -e(|y|) y
-    with e the function :data:`~hybrid.stochastic._codegen.USER_LAW` that the kernel binds, checked in (0, 1]."""
+    with e the function :data:`~hybrid.stochastic._kernel_modules.USER_LAW` that the kernel binds, checked in (0, 1]."""
     from hybrid.automaton import HybridAutomaton, Transition
 
-    e = sp.Function(_codegen.USER_LAW)(sp.Abs(_Y))
+    e = sp.Function(_kernel_modules.USER_LAW)(sp.Abs(_Y))
     transitions = [Transition(t.name, t.source, t.target, t.guard, t.direction, (_X, _Y), t.priority)
                    for t in automaton.transitions]
     out = HybridAutomaton(automaton.states, dict(automaton.parameters), list(automaton.modes), transitions,
@@ -354,7 +354,7 @@ def _generated(model, scheme: str = "symplectic"):
     """The lifted automaton, its observables, the kernel source and structure of ``model`` (memoised: the sympy
     work costs 40-90 ms, as much as a short run)."""
     user = getattr(model.restitution, "callable", None) is not None
-    law = (sp.Function(_codegen.USER_LAW)(sp.Abs(_Y)) if user
+    law = (sp.Function(_kernel_modules.USER_LAW)(sp.Abs(_Y)) if user
            else sp.sympify(model.restitution.expression(sp.Abs(_Y))))
     # srepr keeps every float in full precision (str and the fingerprint keep 15 digits)
     declared = (model.g, model.h, tuple(model.f), sp.Matrix(model.intensity), model.epsilon, model.barrier_exprs)

@@ -32,7 +32,7 @@ from hybrid.errors import (
 )
 from hybrid.sizes import check_limit, check_size
 
-from . import _auto_exec, _codegen, _front, _rng
+from . import _auto_exec, _front, _kernel_modules, _rng
 from ._auto_exec import check_chunk_count, default_chunk_paths
 from ._problem import (
     CHATTER_IMPACTS_PER_STEP,
@@ -543,7 +543,7 @@ def solve_ensemble(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm | No
 def _prepare(problem: EnsembleProblem, algorithm: MonteCarloAlgorithm, ex: Execution):
     """Validate all three groups before anything is compiled; the scheme and the run's settings record."""
     pb, model = problem, problem.model
-    _codegen.refuse_forced(model)
+    _kernel_modules.refuse_forced(model)
     sch = get_scheme(algorithm.scheme)
     x0 = _as_x0(pb.x0)
     settings = _settings(model, sch, algorithm.dt, ex.paths, pb.t_end, pb.t_burn, ex.seed, pb.h_max, pb.bins,
@@ -591,7 +591,7 @@ def _run_on_cpu(model, sch, settings: dict, ex: Execution) -> EnsembleStatistics
     if ckdir is not None:
         _auto_exec.check_directory(ckdir, resume, CHECKPOINT_FILE)
     law_fn = getattr(model.restitution, "callable", None)
-    if ckdir is not None and law_fn is not None and _codegen.callable_digest(law_fn) is None:
+    if ckdir is not None and law_fn is not None and _kernel_modules.callable_digest(law_fn) is None:
         raise CheckpointError(
             f"the restitution callable {model.restitution!r} reads objects that cannot be fingerprinted, so a "
             "checkpoint could be resumed with another law; run without a checkpoint or declare the law as an "

@@ -189,7 +189,7 @@ class _Driver:
     def module(self):
         """The compiled module (compiled, or loaded from the disk cache, on first use: requests are checked first)."""
         if self._module is None:
-            from ._codegen import load_source
+            from ._kernel_modules import load_source
 
             self._module, _ = load_source(*self._source)
         return self._module
