@@ -90,7 +90,8 @@ def mc(law, H_c, dt, paths, seed, t_max):
 
 def step_end(law, H_c, dt, paths, seed, t_max, batch=100):
     """The Monte Carlo mean time with the level watched on the step ends only (the physical states), not on the
-    splitting's sub-step states: the paths of ``sample_paths`` (the same kernel), every step stored, the first
+    splitting's sub-step states: the paths of ``sample_paths`` (the same scheme's kernel, for
+    the model without the exit transition), every step stored, the first
     step end with H + kb |y| >= H_c (continuity-corrected) taken in numpy. Paths still inside at t_max add
     t_max plus the memoryless tail 1/lambda, lambda from the log-slope of the sample's own survival."""
     from first_passage_reference import BETA
