@@ -212,15 +212,35 @@ def test_cli_passage_and_spectrum_write_csv_sidecar_and_summary(tmp_path):
     assert main(["passage", "--domain", "H < 0.5", "--x0", "0", "--out", str(out)]) == 2  # a state has two numbers
 
 
-@pytest.mark.slow  # compiles a kernel of its own
-def test_monte_carlo_first_passage_with_the_exit_as_a_guard():
+def test_monte_carlo_level_is_moved_in_by_the_continuity_correction():
+    # a level watched at steps of dt is crossed late by O(sqrt(dt)); the slack of H < 0.25 has the local noise
+    # sqrt(2 D) |y|, so the exit guard becomes H + 0.5826 sqrt(2 D dt) |y| - 0.25 (no kernel is compiled here)
+    from vibro.passage import _exit_relation
+
     m = DuffingImpact(restitution=Ma(vc=0.4))
-    mc = vibro.first_passage(m, "H < 0.25", method="mc", paths=512, t_max=60.0, seed=3)
-    fpk = first_passage_fpk(m, "H < 0.25", grid=(60, 64), check=False, survival=False)
-    # the guard is watched at the ends of the sub-steps, so the passage comes late by O(sqrt(dt)): about +0.1 to
-    # +0.2 at dt = 0.002 (docs/results/first-passage-spectra.md)
-    assert fpk.mean_time - 3 * mc.error_estimate < mc.mean_time < fpk.mean_time + 3 * mc.error_estimate + 0.25
-    assert mc.details["censored"] == 0 and np.all(mc.R_lo <= mc.R) and np.all(mc.R <= mc.R_hi)
+    base, rel, corrected = _exit_relation(m, Domain("H < 0.25", m), 0.002)
+    values = {"x": 0.3, "y": -0.7, **base.parameters}
+    H = 0.5 * 0.7**2 + values["a"] * 0.3**2 / 2 + values["b"] * 0.3**4 / 4
+    expected = H - 0.25 + 0.5826 * np.sqrt(2 * values["D"] * 0.002) * 0.7
+    guard = rel.lhs.subs({s: values[s.name] for s in rel.lhs.free_symbols})
+    assert corrected and float(guard) == pytest.approx(expected, rel=1e-12)
+    assert _exit_relation(m, Domain("H < 0.25", m))[2] is False
+
+
+@pytest.mark.slow  # compiles two kernels of its own, 40,000 paths each (about 40 CPU s each)
+def test_monte_carlo_first_passage_with_the_exit_as_a_guard():
+    # against the converged reference of benchmarks/data/first_passage_reference.json (5.1646 +- 0.0185, splitting
+    # at three steps); measured: corrected 5.1805 +- 0.0369, uncorrected 5.2857 +- 0.0377 (+2.3 %)
+    m = DuffingImpact(restitution=Ma(vc=0.4))
+    ref, ref_ci = 5.1646, 0.0185
+    runs = {corr: vibro.first_passage(m, "H < 0.25", method="mc", paths=40_000, t_max=60.0, seed=11, points=40,
+                                      chunk_paths=2500, continuity_correction=corr) for corr in (True, False)}
+    mc = runs[True]
+    assert mc.details["continuity_correction"] and mc.details["censored"] == 0
+    assert abs(mc.mean_time - ref) < 3 * np.hypot(mc.error_estimate / 1.96, ref_ci / 1.96)
+    late = runs[False]
+    assert late.mean_time - ref > 2 * np.hypot(late.error_estimate / 1.96, ref_ci / 1.96)  # the bias it removes
+    assert np.all(mc.R_lo <= mc.R) and np.all(mc.R <= mc.R_hi)
 
 
 @pytest.mark.slow  # the docs build in CI runs every example too, and stops on a failed self-check
@@ -230,3 +250,12 @@ def test_examples_run(script):
 
     res = run_example(script, "--quick")
     assert res.returncode == 0 and res.stdout.strip().endswith("OK"), res.stdout + res.stderr
+
+
+def test_monte_carlo_statistics_that_cannot_be_held_are_refused_before_compiling():
+    # 625 chunks x 400 sections x 20,002 exit-time bins: 40 GB, refused with the estimate (it was a MemoryError)
+    from hybrid.sizes import SizeError
+
+    m = DuffingImpact(restitution=Ma(vc=0.4))
+    with pytest.raises(SizeError, match="statistics of 625 chunks needs about 40.1 GB"):
+        vibro.first_passage(m, "H < 0.25", method="mc", paths=40_000, t_max=60.0, points=400, chunk_paths=64)

@@ -690,6 +690,11 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 obs_bins=np.array(bins or [1], dtype=np.int64), jx=jx, jy=jy, j_lo=j_lo, j_scale=j_scale,
                 j_bins=j_bins, v_scale=int(v_bins) / float(v_hi), v_bins=int(v_bins), phases=phases,
                 phase_steps=phase_steps)
+    # every chunk keeps its own statistics until the merge: refuse what cannot be held, before compiling
+    row_bytes = sum(np.dtype(dtype).itemsize * float(np.prod(shape)) for shape, dtype, _ in shapes.values())
+    check_size(f"the statistics of {n_chunks} chunks", memory=n_chunks * row_bytes,
+               detail=f"{row_bytes / 1e6:.3g} MB per chunk: histograms x sections x bins",
+               fix="raise chunk_paths, or ask for fewer bins, sections or snapshots")
     job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
     rows = job.zero_rows(n_chunks)
     device = None
