@@ -85,21 +85,9 @@ def main(which=("free", "folded", "example1")):
                           "order": s.details["order"], "cpu_seconds": time.process_time() - t0}), flush=True)
 
 
-def peak_fit(omega, S, level=0.85):
-    """Vertex of the least-squares parabola through the samples above ``level`` of the highest, around it."""
-    k = int(np.argmax(S))
-    lo, hi = k, k
-    while lo > 0 and S[lo - 1] > level * S[k]:
-        lo -= 1
-    while hi < len(S) - 1 and S[hi + 1] > level * S[k]:
-        hi += 1
-    a, b, _ = np.polyfit(omega[lo:hi + 1], S[lo:hi + 1], 2)
-    return float(-b / (2 * a))
-
-
 def against_monte_carlo(grids, arc_end_order=2):
     """fpk of Example 1 against the stored Monte Carlo reference, one JSON line per grid."""
-    from averaging.phase_plane.spectrum import _half_power_width
+    from averaging.phase_plane.spectrum import _half_power_width, fitted_peak
 
     ref = np.load(Path(__file__).resolve().parent / "data" / "spectrum_reference.npz")
     omega, S_mc = ref["omega"], ref["S"]
@@ -108,8 +96,8 @@ def against_monte_carlo(grids, arc_end_order=2):
     w = omega[pick]
     mc = S_mc[pick]
     k = int(np.argmax(mc))
-    mc_peak = {"peak_fit": peak_fit(w, mc), "peak_fit_dt01": peak_fit(w, ref["S_dt01"][pick]),
-               "peak_fit_dt005": peak_fit(w, ref["S_dt005"][pick]), "bandwidth": _half_power_width(w, mc, k),
+    mc_peak = {"peak_fit": fitted_peak(w, mc), "peak_fit_dt01": fitted_peak(w, ref["S_dt01"][pick]),
+               "peak_fit_dt005": fitted_peak(w, ref["S_dt005"][pick]), "bandwidth": _half_power_width(w, mc, k),
                "variance": float(ref["variance"]), "integral_0_6": float(np.trapezoid(mc, w))}
     print(json.dumps({"case": "example1-mc", **mc_peak, "frequencies": int(pick.sum())}), flush=True)
 
@@ -131,15 +119,15 @@ def against_monte_carlo(grids, arc_end_order=2):
             "case": "example1-fpk-vs-mc", "grid": grid, "arc_end_order": arc_end_order,
             "L1": l1_mc(s.unextrapolated), "L1_extrapolated": l1_mc(s.S),
             "estimate": s.details["error_estimate"], "order": s.details["order"],
-            "peak_fit": peak_fit(w, s.unextrapolated), "peak_fit_extrapolated": peak_fit(w, s.S),
-            "peak_error": peak_fit(w, s.unextrapolated) / mc_peak["peak_fit"] - 1,
+            "peak_fit": fitted_peak(w, s.unextrapolated), "peak_fit_extrapolated": fitted_peak(w, s.S),
+            "peak_error": fitted_peak(w, s.unextrapolated) / mc_peak["peak_fit"] - 1,
             "bandwidth": _half_power_width(w, s.unextrapolated, int(np.argmax(s.unextrapolated))),
             "bandwidth_extrapolated": _half_power_width(w, s.S, kf), "variance_extrapolated": s.variance,
             "integral_0_6_over_variance": float(np.trapezoid(s.S, w)) / s.variance,
             "window_bias_l1": float(np.trapezoid(np.abs(0.5 * d2 * mu2), w) / np.trapezoid(mc, w)),
-            "L1_windowed": l1_mc(seen), "peak_fit_windowed": peak_fit(w, seen),
+            "L1_windowed": l1_mc(seen), "peak_fit_windowed": fitted_peak(w, seen),
             "bandwidth_windowed": _half_power_width(w, seen, int(np.argmax(seen))),
-            "peak_fit_95": peak_fit(w, s.unextrapolated, 0.95), "mc_peak_fit_95": peak_fit(w, mc, 0.95),
+            "peak_fit_95": fitted_peak(w, s.unextrapolated, 0.95), "mc_peak_fit_95": fitted_peak(w, mc, 0.95),
             "cpu_seconds": cpu}), flush=True)
 
 
