@@ -24,7 +24,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from scipy import integrate, linalg, special
 from scipy.stats import ncx2
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,6 +33,7 @@ from benchmarks import fpk_coloured, fpk_forced  # noqa: E402
 from models import ImpactOscillator  # noqa: E402
 from models.excitation import ou_filter  # noqa: E402
 from vibro.solve import solve  # noqa: E402
+from vibro.studies.workprecision import linear_ou_energy_masses  # noqa: E402
 
 C, A, W, D = 0.5, 0.4, 1.3, 0.05
 
@@ -77,16 +77,9 @@ def linear_ou():
     c, d, alpha = 0.5, 0.25, 2.0
     model = ou_filter(ImpactOscillator("x", "c*y", parameters={"c": c, "D": d}, barriers=None, name="linear"),
                       alpha=alpha)
-    S = linalg.solve_continuous_lyapunov(np.array([[0.0, 1.0, 0.0], [-1.0, -c, 1.0], [0.0, 0.0, -alpha]]),
-                                         -np.diag([0.0, 0.0, 2 * alpha**2 * d]))
-    vx, vy = S[0, 0], S[1, 1]
-    a, b = 0.5 * (1 / vx + 1 / vy), 0.5 * (1 / vx - 1 / vy)
 
     def true(sol):
-        e = sol.edges
-        exact = [integrate.quad(lambda H: np.exp(-H * a) * special.i0(H * b) / np.sqrt(vx * vy), lo, hi)[0]
-                 for lo, hi in zip(e[:-1], e[1:])]
-        return float(np.abs(sol.masses - np.array(exact)).sum()), 0.0
+        return float(np.abs(sol.masses - linear_ou_energy_masses(c, d, alpha, sol.edges)).sum()), 0.0
 
     return model, true
 

@@ -416,6 +416,27 @@ def forced_work_precision(quick: bool = True, progress=print):
     return df
 
 
+def linear_ou_energy_masses(c: float, D: float, alpha: float, edges) -> np.ndarray:
+    """Exact masses of p(H), H = (x^2 + y^2) / 2, on ``edges`` for x'' + c x' + x = eta, eta an OU process
+    (d eta = -alpha eta dt + alpha sqrt(2 D) dW): the Gaussian of the Lyapunov covariance, whose (x, y) marginal has
+    independent x and y (zero stationary cross-covariance), so p(H) = exp(-a H) I0(b H) / sqrt(vx vy).
+
+    Examples
+    --------
+    >>> m = linear_ou_energy_masses(0.5, 0.25, 2.0, np.linspace(0.0, 40.0, 401))
+    >>> round(float(m.sum()), 6)
+    1.0
+    """
+    from scipy import linalg, special
+
+    S = linalg.solve_continuous_lyapunov(np.array([[0.0, 1.0, 0.0], [-1.0, -c, 1.0], [0.0, 0.0, -alpha]]),
+                                         -np.diag([0.0, 0.0, 2 * alpha**2 * D]))
+    vx, vy = S[0, 0], S[1, 1]
+    a, b = 0.5 * (1 / vx + 1 / vy), 0.5 * (1 / vx - 1 / vy)
+    return np.array([integrate.quad(lambda H: np.exp(-H * a) * special.i0(H * b) / np.sqrt(vx * vy), lo, hi)[0]
+                     for lo, hi in zip(edges[:-1], edges[1:])])
+
+
 def coloured_work_precision(quick: bool = True, progress=print):
     """The coloured fpk on (x, y, eta) over a ladder of grids: L1 of p(H) against CPU time (the check's coarse
     solve and the white-noise start included).
@@ -428,7 +449,6 @@ def coloured_work_precision(quick: bool = True, progress=print):
     import json
 
     import pandas as pd
-    from scipy import linalg, special
 
     from averaging.phase_plane.coloured import stationary_density_coloured
     from models import ImpactOscillator
@@ -438,13 +458,8 @@ def coloured_work_precision(quick: bool = True, progress=print):
     c, D, alpha = 0.5, 0.25, 2.0
     lin = ou_filter(ImpactOscillator("x", "c*y", parameters={"c": c, "D": D}, barriers=None, name="linear"),
                     alpha=alpha)
-    S = linalg.solve_continuous_lyapunov(np.array([[0.0, 1.0, 0.0], [-1.0, -c, 1.0], [0.0, 0.0, -alpha]]),
-                                         -np.diag([0.0, 0.0, 2 * alpha**2 * D]))
-    vx, vy = S[0, 0], S[1, 1]
-    a, b = 0.5 * (1 / vx + 1 / vy), 0.5 * (1 / vx - 1 / vy)
     edges = np.linspace(0.0, 3.0, L1_BINS + 1)
-    exact = np.array([integrate.quad(lambda H: np.exp(-H * a) * special.i0(H * b) / np.sqrt(vx * vy), lo, hi)[0]
-                      for lo, hi in zip(edges[:-1], edges[1:])])
+    exact = linear_ou_energy_masses(c, D, alpha, edges)
     ladder = ((16, 16, 8), (24, 24, 12), (32, 32, 16)) + (() if quick else ((48, 48, 24), (48, 48, 32)))
     for grid in ladder:
         t0 = time.process_time()
