@@ -217,3 +217,18 @@ def test_against_monte_carlo_phase_resolved():
     # measured 0.5148 and 0.2854
     eh, eh_ci, rate = fpk_forced.mc_summary("0.02")
     assert abs(sol.mean_energy - eh) < 0.001 and abs(sol.impact_rate / rate - 1.0) < 0.005
+
+
+def test_a_symmetric_model_reuses_each_factor_for_its_mirror_image_half_a_period_later(monkeypatch):
+    # (x, y, t) -> (-x, -y, t + T/2) maps the forced Duffing between symmetric walls onto itself, so the step matrix
+    # of t + T/2 is the mirror image of that of t: one LU serves both. The answer is that of separate factors.
+    import averaging.phase_plane.forced as forced
+
+    m = ForcedDuffingImpact(restitution=Newton(0.8), c=0.1, A=0.5, Omega=1.2, D=0.05)
+    kw = dict(grid=(16, 32), steps=16, check=False, h_max=3.0)
+    shared = periodic_density_xy(m, **kw)
+    monkeypatch.setattr(forced._CartesianPlane, "mirror", lambda self: None)
+    separate = periodic_density_xy(m, **kw)
+    assert np.max(np.abs(shared.cell_p - separate.cell_p)) < 1e-9 * np.max(separate.cell_p)
+    # Crank-Nicolson at 16 and 32 steps: 9 + 17 distinct matrices (cos takes each value twice), 5 + 9 factored
+    assert (separate.factors, shared.factors) == (26, 14)

@@ -39,7 +39,9 @@ larger than the plane's (a direct solve does not fit, and its solution is the sa
 the phase (harmonic balance) need many harmonics for the sharp, phase-dependent densities of an impacting orbit,
 and their coupling makes the blocks dense. The period map needs one sparse LU per distinct step matrix, factored
 once and reused by every GMRES iteration; a forcing A cos(Omega t + phi) takes each value twice per period, so
-about K/2 factors are computed per run (the matrices are keyed by the drift they hold).
+about K/2 factors are computed per run (the matrices are keyed by the drift they hold); a model unchanged by
+(x, y, t) -> (-x, -y, t + T/2) (symmetric walls and potential) halves that again, its step matrix at t + T/2 being
+the mirror image of that at t (found by comparing the matrices, solved with the permuted LU).
 
 Error estimate. With ``check`` (default), ``error_estimate`` = ``grid_estimate`` + ``time_estimate`` (L1 of
 p(H | t) on 100 bins, worst phase), and a :class:`GridWarning` names the larger part when the sum exceeds ``l1_tol``.
@@ -52,8 +54,8 @@ alone at 2K steps and the combination) is still reported.
 
 Accuracy (``benchmarks/fpk_forced.py``, docs/results/fpk-forced.md): on example 08 (D = 0.02) the L1 of p(H | t)
 against converged Monte Carlo (noise 0.0022) is 0.0028 mean and 0.0045 worst over 16 phases at the default grid
-(64, 128) with 64 + 128 steps (estimate 0.0045), in 32-36 s CPU and 2.2 GB (44-48 s and 2.5 GB before
-the nested-dissection factors and the looser GMRES tolerance); the linear oscillator's section means
+(64, 128) with 64 + 128 steps (estimate 0.0045), in 25-26 s CPU and 1.5 GB (44-48 s and 2.5 GB before
+the nested-dissection factors, the looser GMRES tolerance and the mirror images); the linear oscillator's section means
 and variances are within 2.3e-6 and 3.5e-5 of the closed form at 64 + 128 steps.
 
 Outputs (:class:`PeriodicDensity`): the density at any time of the period (``section(t)``, a
@@ -424,6 +426,17 @@ class _CartesianPlane:
 
     def operator(self, m):
         return self.disc.operator_with_drift(m)
+
+    def mirror(self):
+        """The cell of (-x, -y) for every cell (an involution), or None where some cell has no mirror image."""
+        g = self.grid
+        ij = np.column_stack([(g.x - g.x.min()) / g.hx, (g.y - g.y.min()) / g.hy])
+        back = np.column_stack([(-g.x - g.x.min()) / g.hx, (-g.y - g.y.min()) / g.hy])
+        if np.max(np.abs(back - np.rint(back))) > 1e-6:
+            return None
+        index = {(int(a), int(b)): k for k, (a, b) in enumerate(np.rint(ij).astype(int))}
+        perm = np.array([index.get((int(a), int(b)), -1) for a, b in np.rint(back).astype(int)])
+        return perm if np.all(perm >= 0) and np.array_equal(perm[perm], np.arange(len(perm))) else None
 
     def unforced(self):
         return null_vector(self.disc.A, self.mass_weight)
@@ -829,16 +842,36 @@ def _fixed_point(plane, operators, drifts, dt, scheme, start, tol, max_iteration
     probe = np.random.default_rng(0).standard_normal(drifts[0].size)
     sums = [float(d.ravel() @ probe) for d in drifts]
     bound = float(np.abs(probe).sum()) * scale * (4e-12 + 4.0 * probe.size * np.finfo(float).eps)  # + round-off
+    # a model symmetric under (x, y, t) -> (-x, -y, t + T / 2) (symmetric walls and potential, a harmonic force)
+    # has the step matrix of t + T / 2 equal to the mirror image P S P^T of that of t: one LU serves both
+    perm = plane.mirror() if hasattr(plane, "mirror") else None
+    mirrored_probes = []  # per factored matrix S_i: (its index in lus, P S_i P^T r, S_i), to find mirror images
+    r = np.random.default_rng(1).standard_normal(plane.n)
     distinct, lus, step_lu = [], [], []
     for k in range(steps):
         d, s = drifts[(k + 1) % steps], sums[(k + 1) % steps]
         same = next((i for i, (e, se) in enumerate(distinct) if abs(s - se) <= bound
                      and np.allclose(d, e, rtol=1e-12, atol=1e-12 * scale)), None)
-        if same is None:
-            distinct.append((d, s))
-            lus.append(_factor((mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsc(), order))
-            same = len(lus) - 1
-        step_lu.append(lus[same])
+        if same is not None:
+            step_lu.append(lus[same])
+            continue
+        S = (mass_coef * M + op_coef * operators[(k + 1) % steps]).tocsr()
+        image = None
+        if perm is not None:
+            Sr = S @ r
+            # equal to round-off: the forcing's cos at t and t + T / 2 and the cancelling sums on the diagonals
+            # leave 5e-10 of max|S| (measured at (16, 32)); a factor within 1e-8 solves the same step to that
+            tol_r = 1e-8 * float(np.abs(Sr).max())
+            image = next((i for i, q, Si in mirrored_probes if np.abs(Sr - q).max() <= tol_r
+                          and abs(S - Si[perm][:, perm]).max() <= 1e-8 * abs(S).max()), None)
+        distinct.append((d, s))
+        if image is None:
+            lus.append(_factor(S.tocsc(), order))
+            if perm is not None:
+                mirrored_probes.append((len(lus) - 1, (S @ r[perm])[perm], S))
+        else:
+            lus.append(_MirroredLU(lus[image], perm))
+        step_lu.append(lus[-1])
     explicit = None if bdf2 else [(M - 0.5 * A).tocsr() for A in operators]
     t1 = time.perf_counter()
     w = plane.mass_weight
@@ -876,11 +909,12 @@ def _fixed_point(plane, operators, drifts, dt, scheme, start, tol, max_iteration
     back = snapshots.pop()
     t2 = time.perf_counter()
     periodicity = float(np.max(np.abs(back - p)) / np.max(np.abs(p)))
-    factors = len(lus)
+    factors = sum(not isinstance(f, _MirroredLU) for f in lus)  # LU factorisations computed
     # free the factors now: the closures above held them past the return (the K run's factors stayed resident
     # through the 2K run, 0.8 GB at the default grid)
     lus.clear()
     step_lu.clear()
+    mirrored_probes.clear()
     _release_freed_memory()
     return np.array(snapshots), periodicity, maps[0], factors, {"factor": t1 - t0, "march": t2 - t1}
 
@@ -908,6 +942,16 @@ def _factor(A, order=None):
                                      relax=4, panel_size=16), order)
     except RuntimeError:  # exactly singular with this pivoting
         return spla.splu(A, permc_spec="COLAMD")
+
+
+class _MirroredLU:
+    """Solves P S P^T x = b with the LU of S (P an involution of the cells): x = P S^-1 P^T b."""
+
+    def __init__(self, lu, perm):
+        self._lu, self._perm = lu, perm
+
+    def solve(self, b):
+        return self._lu.solve(b[self._perm])[self._perm]
 
 
 class _PermutedLU:
