@@ -690,19 +690,19 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
                 obs_bins=np.array(bins or [1], dtype=np.int64), jx=jx, jy=jy, j_lo=j_lo, j_scale=j_scale,
                 j_bins=j_bins, v_scale=int(v_bins) / float(v_hi), v_bins=int(v_bins), phases=phases,
                 phase_steps=phase_steps)
+    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
+    device = None
+    if scheduler == "cuda":  # the same generated step code on the GPU, one thread per path (refuses its own sizes)
+        from . import _auto_cuda
+
+        device = _auto_cuda.CudaRun(job, automaton, scheme, obs, convention, summed=summed, phases=phases,
+                                    n_trans=n_tr, seed=seed, precision=precision, threads_per_block=threads_per_block)
     # every chunk keeps its own statistics until the merge: refuse what cannot be held, before compiling
     row_bytes = sum(np.dtype(dtype).itemsize * float(np.prod(shape)) for shape, dtype, _ in shapes.values())
     check_size(f"the statistics of {n_chunks} chunks", memory=n_chunks * row_bytes,
                detail=f"{row_bytes / 1e6:.3g} MB per chunk: histograms x sections x bins",
                fix="raise chunk_paths, or ask for fewer bins, sections or snapshots")
-    job = _auto_exec.AutomatonJob(name, src, args, npaths, shapes)
     rows = job.zero_rows(n_chunks)
-    device = None
-    if scheduler == "cuda":  # the same generated step code on the GPU, one thread per path
-        from . import _auto_cuda
-
-        device = _auto_cuda.CudaRun(job, automaton, scheme, obs, convention, summed=summed, phases=phases,
-                                    n_trans=n_tr, seed=seed, precision=precision, threads_per_block=threads_per_block)
     module = job.module() if device is None else None  # compile (or load) here, before the pilot and any worker
 
     step_rule = None
