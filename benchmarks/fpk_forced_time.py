@@ -29,6 +29,9 @@ from hybrid.automaton import lambdify_numeric  # noqa: E402
 from models import ForcedDuffingImpact, ImpactOscillator, Newton, X, Y  # noqa: E402
 from models.oscillator import T  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "tests"))
+from problems import forced_linear_energy_masses  # noqa: E402
+
 PHASES = 8
 
 
@@ -85,8 +88,6 @@ def study(label, model, h, fine, coarse, ks, ref_k):
 def total_linear(lin, runs):
     """The whole estimate (cells + time steps) of ``periodic_density_xy`` against the closed form: 2 c H / D is
     noncentral chi-square at every section (L1 of p(H | t) on 100 bins of its range, worst of 8 phases)."""
-    from scipy.stats import ncx2
-
     c, A, W, D = (lin.params[k] for k in ("c", "A", "W", "D"))
     z = A / (1.0 - W**2 + 1j * c * W)
     print("linear oscillator, the whole estimate against the closed form (L1 of p(H | t), 100 bins, worst of 8 "
@@ -99,8 +100,7 @@ def total_linear(lin, runs):
         edges = np.linspace(0.0, sol.grid.h_max, 101)
         true = 0.0
         for t, s in zip(sol.phase_times(8), sol.sections(8)):
-            xp, yp = (z * np.exp(1j * W * t)).real, (1j * W * z * np.exp(1j * W * t)).real
-            exact = np.diff(ncx2.cdf(2.0 * edges * c / D, 2, (xp**2 + yp**2) * c / D))
+            exact = forced_linear_energy_masses(z, W, c, D, t, edges)
             true = max(true, float(np.abs(s.bin_masses(edges) - exact).sum()))
         print(f"   {str(grid):10s} {K:3d} + {2 * K:3d}  {sol.grid_estimate:.2e}  {sol.time_estimate:.2e}  "
               f"{sol.error_estimate:.2e}  {true:.2e}  {sol.error_estimate / true:6.2f}           {cpu:.1f}", flush=True)

@@ -159,6 +159,16 @@ def linear_oscillator_energy_density(H, c: float, D: float):
     return (c / D) * np.exp(-c * H / D)
 
 
+def forced_linear_energy_masses(response: complex, omega: float, c: float, D: float, t: float, edges) -> np.ndarray:
+    """Exact masses of p(H | t) on ``edges`` for x'' + c x' + x = Re(F e^{i omega t}) + sqrt(2 D) xi, without walls:
+    the section at t is Gaussian with mean the periodic response (``response`` = F / (1 - omega^2 + i c omega)) and
+    covariance D/c I, so 2 H c / D is noncentral chi-square with 2 degrees of freedom."""
+    from scipy.stats import ncx2
+
+    xp, yp = (response * np.exp(1j * omega * t)).real, (1j * omega * response * np.exp(1j * omega * t)).real
+    return np.diff(ncx2.cdf(2.0 * np.asarray(edges) * c / D, 2, (xp**2 + yp**2) * c / D))
+
+
 def ou_stationary_variance(c: float, D: float) -> float:
     """dv = -c v dt + sqrt(2D) dB: stationary variance D / c."""
     return D / c
