@@ -19,6 +19,7 @@ from averaging import mean_first_passage_time
 from averaging.phase_plane import first_passage_fpk, solve_phase_plane, spectrum_fpk
 from averaging.phase_plane.passage import BackwardProblem, Domain, crossing_rate
 from hybrid.errors import ParameterError
+from hybrid.sizes import SizeError
 from models import DuffingImpact, Elastic, ImpactOscillator, Ma
 
 
@@ -254,8 +255,24 @@ def test_examples_run(script):
 
 def test_monte_carlo_statistics_that_cannot_be_held_are_refused_before_compiling():
     # 625 chunks x 400 sections x 20,002 exit-time bins: 40 GB, refused with the estimate (it was a MemoryError)
-    from hybrid.sizes import SizeError
-
     m = DuffingImpact(restitution=Ma(vc=0.4))
     with pytest.raises(SizeError, match="statistics of 625 chunks needs about 40.1 GB"):
         vibro.first_passage(m, "H < 0.25", method="mc", paths=40_000, t_max=60.0, points=400, chunk_paths=64)
+
+
+def test_a_start_within_the_correction_band_keeps_the_plain_level_and_says_so():
+    # H = 0.2415 at (0, 0.695) is inside H < 0.25 as written but within 0.5826 sqrt(2 D dt) |y| = 0.0057 of the level
+    # at dt = 0.01: the corrected relation would refuse the start in words the user never wrote (found in review)
+    from averaging.phase_plane import PassageWarning
+    from hybrid.sizes import SizeError
+    from vibro.passage import _exit_relation, _slack_at
+
+    m = DuffingImpact(restitution=Ma(vc=0.4))
+    base, rel, corrected = _exit_relation(m, Domain("H < 0.25", m), 0.01)
+    assert corrected and _slack_at(base, rel.lhs, (0.0, 0.695)) > 0 > _slack_at(base, rel.lhs, (0.0, 0.3))
+    with pytest.warns(PassageWarning, match="within 0.5826 sqrt"):
+        with pytest.raises(SizeError):  # stops at the size check, before any compile: the warning came first
+            vibro.first_passage(m, "H < 0.25", (0.0, 0.695), method="mc", dt=0.01, paths=40_000, t_max=60.0,
+                                points=400, chunk_paths=64)
+    with pytest.raises(ParameterError, match="lies outside the domain 'H < 0.25'"):  # outside as written
+        vibro.first_passage(m, "H < 0.25", (0.0, 0.8), method="mc", dt=0.01, paths=64, t_max=1.0)

@@ -151,8 +151,11 @@ def fitted_peak(omega, S, level: float = 0.85) -> float:
         lo -= 1
     while hi < len(S) - 1 and S[hi + 1] > level * S[k]:
         hi += 1
+    if hi - lo < 2:  # fewer than three samples above the level (a sharp peak, or one at an end): a parabola through
+        return _peak_location(omega, S, k)  # the highest sample and its neighbours
     a, b, _ = np.polyfit(omega[lo:hi + 1], S[lo:hi + 1], 2)
-    return float(-b / (2 * a))
+    vertex = -b / (2 * a)
+    return float(vertex) if a < 0 and omega[lo] <= vertex <= omega[hi] else _peak_location(omega, S, k)
 
 
 def _half_power_width(omega, S, k):

@@ -146,7 +146,8 @@ def solve(model, tol: float = 0.02, *, method: str = "auto", max_cost: float = 6
     from models.excitation import FilteredAutomaton
 
     filtered = isinstance(model, FilteredAutomaton)
-    if phases is not None and (isinstance(phases, bool) or int(phases) != phases or phases < 1):
+    if phases is not None and (isinstance(phases, bool) or not isinstance(phases, (int, float, np.integer))
+                               or not np.isfinite(phases) or int(phases) != phases or phases < 1):
         raise ParameterError(f"phases={phases!r} must be a whole number >= 1")
     if phases is not None and not getattr(model, "is_forced", False):
         raise ParameterError("phases applies to a forced model (a periodic density), not to this one")
