@@ -226,7 +226,7 @@ def first_passage_mc(model, domain: Domain, start, *, paths: int = 2000, dt: flo
         # the start lies within the correction's band of the level, or outside the domain (which the plain relation
         # refuses below, in the user's words): the correction, asymptotic for levels far from the start, is off
         base, relation, corrected = _exit_relation(model, domain)
-        if _slack_at(base, relation.lhs, start) < 0:
+        if domain.contains(*start):
             warnings.warn(f"the start lies within 0.5826 sqrt(dt) sigma of the level of {domain.text!r}: the Monte "
                           "Carlo watches the plain level (late by O(sqrt(dt))); lower dt or start further inside",
                           PassageWarning, stacklevel=3)
