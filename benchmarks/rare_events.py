@@ -1,91 +1,147 @@
-"""Rare events: fixed-level splitting against brute force and against an exact answer, with their costs.
+"""Rare events: fixed-level splitting against exact answers and brute force, with the variance reduction at equal cost.
 
-1. Brownian motion, P(max_{t<=1} W >= b) = 2 P(W_1 >= b + 0.5826 sqrt(dt)) for a path watched every dt (the
-   reflection principle with Broadie and Glasserman's continuity correction), at b = 3.5 (4e-4) and b = 4.75 (2e-6).
-2. Example 1 (Duffing, Ma V_C = 0.4, walls at +-1) from rest: P(H reaches H_c before t = 10), by splitting and by
-   brute-force event-exact Monte Carlo (simulate_first_passage) where brute force is affordable.
+1. An Ornstein-Uhlenbeck process dx = -x dt + sqrt(2) dW (em scheme, dt = 0.01) from 0: P(max_{t <= 1} x >= b) at
+   b = 3.25, 4.69, 5.80 (1.0e-3, 1.03e-6, 1.02e-9). The exact answer is that of the simulated Euler chain, by
+   quadrature (tests/problems.py ``euler_ou_exceedance``, relative accuracy ~1e-7), so it judges the estimator and
+   its interval with no step-size error in between.
+2. Example 1 (Duffing, Ma V_C = 0.4, walls at +-1) from rest: P(H reaches H_c before t = 10), splitting scheme at
+   dt = 0.01, at H_c = 2.7 (about 1e-3, where brute force is affordable and run), 4.1 (about 1e-6) and 5.2 (about
+   1e-9).
 
-For each: the estimate, its 95 % interval, the exact or brute-force value, the path-steps and wall seconds spent,
-and the cost brute force would need for the same relative error, in path-steps and in seconds at the brute-force
-throughput measured in this run (the splitting steps go through the kernel's general event step, which costs more
-per step than the fast loop of brute force; both ratios are printed).
+Cost is CPU seconds of this process (compile excluded; brute force uses two threads, counted both). The variance
+reduction at equal cost is the ratio of work-normalised relative variances,
 
-Run:  python benchmarks/rare_events.py [--quick]
+    VR = ((1 - P) / P * c_bf) / (RE^2 * C_split),
+
+c_bf the measured CPU seconds of one brute-force path to t_max, RE^2 = (replica relative variance) / replicas the
+splitting estimate's squared relative error and C_split its CPU seconds (``RareEventEstimate.variance_reduction``).
+Where brute force is run (P ~ 1e-3) its own work-normalised variance, (1 - P) / (P n) * C_bf, is printed beside the
+formula's. ``--coverage`` repeats the OU estimates over seeds and counts how often the 95 % interval holds the exact
+answer.
+
+Run:  python benchmarks/rare_events.py [--quick] [--coverage]
 """
 
 import argparse
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
-from scipy.stats import norm
 
-from hybrid.automaton import HybridAutomaton, Mode
-from hybrid.stochastic import simulate_first_passage, splitting_probability
-from models import DuffingImpact, Ma
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from problems import euler_ou_exceedance  # noqa: E402
+
+from hybrid.automaton import HybridAutomaton, Mode  # noqa: E402
+from hybrid.stochastic import simulate_first_passage, splitting_probability  # noqa: E402
+from models import DuffingImpact, Ma  # noqa: E402
+
+OU_LEVELS = ((3.25, 5), (4.69, 10), (5.80, 15))  # (b, levels): P about 1e-3, 1e-6, 1e-9
+EXAMPLE_LEVELS = ((2.7, 6), (4.1, 14), (5.2, 18))
 
 
-def brownian():
+def ou():
     x = sp.Symbol("x")
-    return HybridAutomaton((x,), {"s": 1.0}, [Mode("m", (sp.Integer(0),), (sp.Symbol("s"),))])
+    return HybridAutomaton((x,), {"th": 1.0, "s": math.sqrt(2.0)},
+                           [Mode("m", (-sp.Symbol("th") * x,), (sp.Symbol("s"),))])
 
 
 def brute_force(automaton, domain, *, dt, t_max, x0, paths, scheme, seed=1):
-    """P(leave the domain before t_max) by brute force: (estimate, Wilson interval, path-steps per second)."""
-    started = time.perf_counter()
+    """P(leave the domain before t_max) by brute force: (P, its 95 % Wilson interval, CPU s per path)."""
+    started = time.process_time()
     run = simulate_first_passage(automaton, domain, scheme, dt=dt, paths=paths, t_max=t_max, x0=x0, snapshots=1,
                                  chunk_paths=max(1, paths // 32), seed=seed)
-    wall = time.perf_counter() - started - run.ensemble.settings.get("compile_time", 0.0)
+    cpu = time.process_time() - started
     lo, hi = run.survival_interval()
-    steps = paths * t_max / dt
-    return 1 - run.survival[-1], (1 - hi[-1], 1 - lo[-1]), steps / max(wall, 1e-9)
+    return 1 - run.survival[-1], (1 - hi[-1], 1 - lo[-1]), cpu / paths
 
 
-def report(name, est, reference, rate):
-    brute_seconds = est.brute_force_steps / rate
-    print(f"{name}")
-    print(f"  splitting   P = {est.probability:.4g} ± {est.ci:.2g} (95 %, {len(est.replicas)} replicas; "
-          f"relative {est.relative_error:.1%})   reference {reference}")
-    print(f"  cost        {est.path_steps:.3g} path-steps in {est.wall_time:.1f} s; brute force for the same "
-          f"relative error: {est.brute_force_steps:.3g} path-steps, ~{brute_seconds:.3g} s at {rate / 1e6:.1f} M "
-          f"path-steps/s")
-    print(f"  ratio       {est.speedup:.3g}x fewer path-steps, {brute_seconds / max(est.wall_time, 1e-9):.3g}x less "
-          "wall time")
+def row(name, est, reference, per_path, measured_bf=None):
+    vr = est.variance_reduction(per_path)
+    bf = f"; brute force measured: {measured_bf}" if measured_bf else ""
+    print(f"{name}\n  splitting P = {est.probability:.4g} ± {est.ci:.2g} (95 %, {len(est.replicas)} replicas x "
+          f"{est.settings['clones']} clones, {len(est.levels)} levels; relative {est.relative_error:.1%})   "
+          f"reference {reference}")
+    print(f"  cost {est.cpu_time:.2f} CPU s ({est.path_steps:.3g} path-steps); one replica's relative variance "
+          f"{est.replica_relative_variance:.3f}; brute force {per_path * 1e6:.1f} CPU us per path{bf}")
+    print(f"  variance reduction at equal CPU: {vr:.3g}x   (brute force for the same interval: "
+          f"{vr * est.cpu_time:.3g} CPU s; in path-steps {est.speedup:.3g}x)")
+    return vr
+
+
+def coverage(calls: int) -> None:
+    """The 95 % interval's coverage of the exact answer over seeds, at clones 200 and 1000."""
+    print(f"\nCoverage over {calls} seeds (OU, 8 replicas each):")
+    print("| P (exact) | clones | pooled mean / exact | coverage | misses low / high | one replica's rel. var. | CPU s "
+          "per estimate |")
+    print("|---|---|---|---|---|---|---|")
+    for b, levels in OU_LEVELS:
+        exact = euler_ou_exceedance(b)
+        for clones in (200, 1000):
+            est = [splitting_probability(ou(), "x", b, levels=levels, t_max=1.0, x0=(0.0,), dt=0.01, clones=clones,
+                                         replicas=8, scheme="em", seed=10_000 + k) for k in range(calls)]
+            reps = np.concatenate([e.replicas for e in est])
+            pooled, se = reps.mean() / exact, 1.96 * reps.std(ddof=1) / math.sqrt(len(reps)) / exact
+            low = np.mean([e.probability + e.ci < exact for e in est])
+            high = np.mean([e.probability - e.ci > exact for e in est])
+            print(f"| {exact:.4g} | {clones} | {pooled:.3f} ± {se:.3f} | {1 - low - high:.3f} | {low:.3f} / {high:.3f}"
+                  f" | {reps.var(ddof=1) / reps.mean() ** 2:.3f} | {np.mean([e.cpu_time for e in est]):.2f} |")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="fewer clones (a smoke run)")
+    parser = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer clones and paths (a smoke run)")
+    parser.add_argument("--coverage", type=int, nargs="?", const=100, default=0, metavar="CALLS",
+                        help="also repeat the OU estimates over CALLS seeds (default 100) and count the coverage")
     args = parser.parse_args()
     scale = 4 if args.quick else 1
-    dt = 1e-3
-    bm = brownian()
-    # warm both kernels first: compile time is not the method's cost
-    splitting_probability(bm, "x", 1.0, levels=1, t_max=0.1, x0=(0.0,), dt=dt, clones=2, replicas=2, scheme="em")
-    _, _, rate = brute_force(bm, "x < 3", dt=dt, t_max=1.0, x0=(0.0,), paths=64, scheme="em")
-    _, _, rate = brute_force(bm, "x < 3", dt=dt, t_max=1.0, x0=(0.0,), paths=20_000, scheme="em")
-    for b, levels, clones in ((3.5, 8, 1600), (4.75, 24, 3200)):
-        exact = 2 * norm.sf(b + 0.5826 * math.sqrt(dt))
-        est = splitting_probability(bm, "x", b, levels=levels, t_max=1.0, x0=(0.0,), dt=dt, clones=clones // scale,
-                                    replicas=8, scheme="em", seed=9)
-        report(f"Brownian motion, b = {b} ({levels} levels, {clones // scale} clones)", est,
-               f"{exact:.4g} (exact; within the interval: {abs(est.probability - exact) <= est.ci})", rate)
+    import warnings
 
+    from hybrid.stochastic import RareEventWarning
+    warnings.simplefilter("always", RareEventWarning)
+
+    print("1. OU process, em, dt = 0.01, t_max = 1 (exact: the Euler chain by quadrature)")
+    bf_p, (lo, hi), per_path = brute_force(ou(), "x < 3.25", dt=0.01, t_max=1.0, x0=(0.0,), paths=64, scheme="em")
+    paths = 400_000 // scale
+    bf_p, (lo, hi), per_path = brute_force(ou(), "x < 3.25", dt=0.01, t_max=1.0, x0=(0.0,), paths=paths, scheme="em")
+    vrs = []
+    for b, levels in OU_LEVELS:
+        exact = euler_ou_exceedance(b)
+        replicas = 32 if b == OU_LEVELS[0][0] else 8
+        est = splitting_probability(ou(), "x", b, levels=levels, t_max=1.0, x0=(0.0,), dt=0.01, clones=1000 // scale,
+                                    replicas=replicas, scheme="em", seed=9)
+        measured = None
+        if b == OU_LEVELS[0][0]:
+            work = (1 - bf_p) / bf_p * per_path  # n paths: RE^2 = (1 - P)/(P n), cost n c_bf
+            measured = (f"P = {bf_p:.4g} [{lo:.4g}, {hi:.4g}] ({paths} paths), (1-P)/P * c_bf = {work:.3g} CPU s; "
+                        f"splitting RE^2 * C = {est.replica_relative_variance / replicas * est.cpu_time:.3g} CPU s")
+        vrs.append(row(f"b = {b}", est, f"{exact:.5g} exact (estimate / exact = {est.probability / exact:.3f}; "
+                                          f"within the interval: {abs(est.probability - exact) <= est.ci})",
+                       per_path, measured))
+
+    print("\n2. Example 1 from rest, splitting scheme, dt = 0.01, t_max = 10")
     model = DuffingImpact(restitution=Ma(0.4))
-    dt = 0.01
-    splitting_probability(model, "H", 0.2, levels=1, t_max=0.1, x0=(0.0, 0.0), dt=dt, clones=2, replicas=2)
-    brute_force(model, "H < 1.5", dt=dt, t_max=10.0, x0=(0.0, 0.0), paths=64, scheme="splitting")
-    p, (lo, hi), rate = brute_force(model, "H < 1.5", dt=dt, t_max=10.0, x0=(0.0, 0.0), paths=40_000 // scale,
-                                    scheme="splitting")
-    est = splitting_probability(model, "H", 1.5, levels=10, t_max=10.0, x0=(0.0, 0.0), dt=dt, clones=800 // scale,
-                                replicas=8, seed=3)
-    report("Example 1 from rest, H reaches 1.5 before t = 10 (10 levels)", est,
-           f"{p:.4g} [{lo:.4g}, {hi:.4g}] (brute force, {40_000 // scale} paths; intervals overlap: "
-           f"{abs(est.probability - p) <= est.ci + (hi - lo) / 2})", rate)
-    est = splitting_probability(model, "H", 3.0, levels=np.linspace(0.15, 3.0, 20), t_max=10.0, x0=(0.0, 0.0),
-                                dt=dt, clones=1600 // scale, replicas=8, seed=4)
-    report("Example 1 from rest, H reaches 3.0 before t = 10 (20 levels)", est, "none affordable", rate)
+    brute_force(model, "H < 2.7", dt=0.01, t_max=10.0, x0=(0.0, 0.0), paths=64, scheme="splitting")
+    paths = 400_000 // scale
+    bf_p, (lo, hi), per_path = brute_force(model, "H < 2.7", dt=0.01, t_max=10.0, x0=(0.0, 0.0), paths=paths,
+                                           scheme="splitting", seed=2)
+    for H_c, levels in EXAMPLE_LEVELS:
+        first = H_c == EXAMPLE_LEVELS[0][0]
+        est = splitting_probability(model, "H", H_c, levels=levels, t_max=10.0, x0=(0.0, 0.0), dt=0.01,
+                                    clones=(300 if first else 1000) // scale, replicas=16 if first else 8, seed=3)
+        if first:
+            work = (1 - bf_p) / bf_p * per_path
+            reference = (f"{bf_p:.4g} [{lo:.4g}, {hi:.4g}] brute force, {paths} paths (intervals overlap: "
+                         f"{abs(est.probability - bf_p) <= est.ci + (hi - lo) / 2})")
+            measured = (f"(1-P)/P * c_bf = {work:.3g} CPU s; splitting RE^2 * C = "
+                        f"{est.replica_relative_variance / len(est.replicas) * est.cpu_time:.3g} CPU s")
+        else:
+            reference, measured = "none affordable (brute force cost extrapolated by the formula)", None
+        row(f"H_c = {H_c}", est, reference, per_path, measured)
+    if args.coverage:
+        coverage(args.coverage)
 
 
 if __name__ == "__main__":

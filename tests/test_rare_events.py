@@ -1,66 +1,111 @@
-"""Rare events by fixed-level splitting on event-exact paths (issue 26, item 3), against the reflection principle.
+"""Rare events by fixed-level splitting on event-exact paths (issue 26, item 3), against exact answers.
 
-For x = W (Brownian motion from 0), P(max_{t <= T} x >= b) = 2 P(W_T >= b). A path watched every dt crosses a
-level as if it were moved out by 0.5826 sqrt(dt) (Broadie and Glasserman's continuity correction), which gives the
-exact answer of the simulated process to well below the intervals tested here.
+The oracle is the exact exceedance probability of the simulated process itself: for the Euler chain of
+dx = -theta x dt + s dW, read at step ends, ``problems.euler_ou_exceedance`` carries the density of the surviving
+paths by quadrature (relative accuracy better than 1e-6 here, far inside the intervals tested). theta = 0 is Brownian
+motion watched every dt. All tests share one automaton (theta and s are parameters) and the em scheme: one kernel.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 import sympy as sp
-from scipy.stats import norm
+from problems import euler_ou_exceedance
 
 from hybrid.automaton import HybridAutomaton, Mode
 from hybrid.errors import ModelError, ParameterError
-from hybrid.stochastic import splitting_probability
-from models import DuffingImpact
+from hybrid.stochastic import RareEventWarning, simulate_first_passage, splitting_probability
+from models import DuffingImpact, Ma
 
 
-def brownian():
+def ou():
+    """dx = -th x dt + s dW (th = 0: Brownian motion)."""
     x = sp.Symbol("x")
-    return HybridAutomaton((x,), {"s": 1.0}, [Mode("m", (sp.Integer(0),), (sp.Symbol("s"),))])
+    return HybridAutomaton((x,), {"th": 1.0, "s": math.sqrt(2.0)},
+                           [Mode("m", (-sp.Symbol("th") * x,), (sp.Symbol("s"),))])
 
 
-def exceedance(b: float, dt: float, t_max: float = 1.0) -> float:
-    return 2 * norm.sf((b + 0.5826 * math.sqrt(dt)) / math.sqrt(t_max))
+def split(b, *, levels, clones, seed, theta=1.0, replicas=8, s: float = math.sqrt(2.0)):
+    return splitting_probability(ou(), "x", b, levels=levels, t_max=1.0, x0=(0.0,), dt=0.01, clones=clones,
+                                 replicas=replicas, scheme="em", seed=seed, params={"th": theta, "s": s})
 
 
-def test_splitting_meets_the_reflection_principle_at_4e_4():
-    dt = 1e-3
-    est = splitting_probability(brownian(), "x", 3.5, levels=6, t_max=1.0, x0=(0.0,), dt=dt, clones=300,
-                                replicas=6, scheme="em", seed=5)
-    exact = exceedance(3.5, dt)
+def test_splitting_meets_the_exact_chain_at_1e_3():
+    exact = euler_ou_exceedance(3.25, per_sigma=10)
+    assert 0.9e-3 < exact < 1.1e-3
+    est = split(3.25, levels=5, clones=300, seed=5)
     assert abs(est.probability - exact) <= est.ci, (est, exact)
-    assert est.relative_error < 0.5 and est.stage_shares.shape == (6, 6)
+    assert est.relative_error < 0.5 and est.stage_shares.shape == (8, 5)
     assert np.all((est.stage_shares > 0) & (est.stage_shares < 1))
+    assert est.replica_relative_variance < 0.3 and est.cpu_time > 0
     # the variance reduction is real: brute force needs more steps for the same relative error
-    assert est.speedup > 5
-    again = splitting_probability(brownian(), "x", 3.5, levels=6, t_max=1.0, x0=(0.0,), dt=dt, clones=300,
-                                  replicas=6, scheme="em", seed=5)
+    assert est.speedup > 3
+    again = split(3.25, levels=5, clones=300, seed=5)
     assert np.array_equal(again.replicas, est.replicas)  # same seed, same numbers
 
 
+def test_brownian_motion_against_the_exact_random_walk():
+    # theta = 0, s = 1: the Gaussian random walk watched every dt. The reflection principle with the continuity
+    # correction, 2 P(W_1 >= b + 0.5826 sqrt(dt)) = 3.733e-4, is 1.7 % low of the exact 3.7988e-4 at dt = 0.01
+    exact = euler_ou_exceedance(3.5, theta=0.0, s=1.0, per_sigma=10)
+    assert 3.79e-4 < exact < 3.81e-4
+    est = split(3.5, levels=6, clones=300, seed=3, theta=0.0, s=1.0)
+    assert abs(est.probability - exact) <= est.ci, (est, exact)
+
+
+def test_skewed_replicas_are_warned_about():
+    # 20 clones for 1e-6: replicas die out or spread far beyond what the Student interval holds
+    with pytest.warns(RareEventWarning, match="undercovers"):
+        split(4.69, levels=10, clones=20, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RareEventWarning)
+        split(3.25, levels=5, clones=300, seed=5)
+
+
 @pytest.mark.slow
-def test_splitting_reaches_one_in_a_million_within_its_interval():
-    dt = 1e-3
-    est = splitting_probability(brownian(), "x", 4.75, levels=24, t_max=1.0, x0=(0.0,), dt=dt, clones=3200,
-                                replicas=8, scheme="em", seed=9)
-    exact = exceedance(4.75, dt)
-    assert 1e-6 < exact < 3e-6
+@pytest.mark.parametrize("b, levels, exact_range", [(4.69, 10, (1e-6, 1.05e-6)), (5.80, 15, (1e-9, 1.05e-9))])
+def test_splitting_reaches_1e_6_and_1e_9_within_its_interval(b, levels, exact_range):
+    exact = euler_ou_exceedance(b)
+    assert exact_range[0] < exact < exact_range[1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RareEventWarning)  # 1000 clones keep the replicas' spread in range
+        est = split(b, levels=levels, clones=1000, seed=11)
     assert abs(est.probability - exact) <= est.ci and est.relative_error < 0.3, (est, exact)
-    assert est.speedup > 100
+    assert est.speedup > 1000
+
+
+@pytest.mark.slow
+def test_interval_coverage_over_seeds_at_1e_3():
+    # 100 independent estimates (8 replicas of 200 clones each): the 95 % interval must cover the exact answer
+    # about 95 times; 0.88 is 3 binomial standard errors below
+    exact = euler_ou_exceedance(3.25)
+    hits = [abs(e.probability - exact) <= e.ci for e in (split(3.25, levels=5, clones=200, seed=2000 + k)
+                                                         for k in range(100))]
+    assert 0.88 <= np.mean(hits) <= 1.0
+
+
+@pytest.mark.slow
+def test_example_1_splitting_against_brute_force_at_1e_3():
+    model = DuffingImpact(restitution=Ma(0.4))
+    run = simulate_first_passage(model, "H < 2.7", "splitting", dt=0.01, paths=200_000, t_max=10.0, x0=(0.0, 0.0),
+                                 snapshots=1, chunk_paths=6250, seed=4)
+    p = 1 - run.survival[-1]
+    lo, hi = run.survival_interval()
+    assert 7e-4 < p < 1.5e-3
+    est = splitting_probability(model, "H", 2.7, levels=6, t_max=10.0, x0=(0.0, 0.0), dt=0.01, clones=300,
+                                replicas=8, seed=3)
+    assert abs(est.probability - p) <= est.ci + (hi[-1] - lo[-1]) / 2, (est, p)
 
 
 def test_splitting_requests_are_checked():
     with pytest.raises(ParameterError, match="levels must increase"):
-        splitting_probability(brownian(), "x", 2.0, levels=[1.5, 1.0, 2.0], t_max=1.0, x0=(0.0,), dt=0.01,
-                              scheme="em")
+        splitting_probability(ou(), "x", 2.0, levels=[1.5, 1.0, 2.0], t_max=1.0, x0=(0.0,), dt=0.01, scheme="em")
     with pytest.raises(ParameterError, match="clones"):
-        splitting_probability(brownian(), "x", 2.0, levels=2, t_max=1.0, x0=(0.0,), dt=0.01, clones=1, scheme="em")
+        splitting_probability(ou(), "x", 2.0, levels=2, t_max=1.0, x0=(0.0,), dt=0.01, clones=1, scheme="em")
     with pytest.raises(ParameterError, match="levels must increase"):  # the start H = 0.72 is above the level
         splitting_probability(DuffingImpact(), "H", 0.5, levels=[0.5], t_max=1.0, x0=(0.0, 1.2), dt=0.01)
     x = sp.Symbol("x")

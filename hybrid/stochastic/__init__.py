@@ -65,7 +65,7 @@ from ._front import AUTOMATON_SCHEME_OF  # noqa: E402
 __all__ += ["AUTOMATON_SCHEMES", "AUTOMATON_SCHEME_OF", "AutomatonEnsemble", "drive_automaton", "simulate_automaton"]
 from ._passage import PassageEnsemble, simulate_first_passage  # noqa: E402
 from ._snapshots import SnapshotEnsemble, simulate_snapshots  # noqa: E402
-from ._splitting import RareEventEstimate, splitting_probability  # noqa: E402
+from ._splitting import RareEventEstimate, RareEventWarning, splitting_probability  # noqa: E402
 
-__all__ += ["PassageEnsemble", "RareEventEstimate", "SnapshotEnsemble", "simulate_first_passage",
+__all__ += ["PassageEnsemble", "RareEventEstimate", "RareEventWarning", "SnapshotEnsemble", "simulate_first_passage",
             "simulate_snapshots", "splitting_probability"]
