@@ -67,13 +67,14 @@ def test_skewed_replicas_are_warned_about():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("b, levels, exact_range", [(4.69, 10, (1e-6, 1.05e-6)), (5.80, 15, (1e-9, 1.05e-9))])
-def test_splitting_reaches_1e_6_and_1e_9_within_its_interval(b, levels, exact_range):
+@pytest.mark.parametrize("b, levels, clones, exact_range", [(4.69, 10, 1000, (1e-6, 1.05e-6)),
+                                                            (5.80, 15, 2000, (1e-9, 1.05e-9))])
+def test_splitting_reaches_1e_6_and_1e_9_within_its_interval(b, levels, clones, exact_range):
     exact = euler_ou_exceedance(b)
     assert exact_range[0] < exact < exact_range[1]
     with warnings.catch_warnings():
-        warnings.simplefilter("error", RareEventWarning)  # 1000 clones keep the replicas' spread in range
-        est = split(b, levels=levels, clones=1000, seed=11)
+        warnings.simplefilter("error", RareEventWarning)  # these clones keep the replicas' spread in range
+        est = split(b, levels=levels, clones=clones, seed=11, replicas=16)
     assert abs(est.probability - exact) <= est.ci and est.relative_error < 0.3, (est, exact)
     assert est.speedup > 1000
 

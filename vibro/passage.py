@@ -272,7 +272,9 @@ def first_passage_splitting(model, domain: Domain, start, *, t_max: float | None
     P, half = est.probability, est.ci
     details = {"probability": P, "ci": [P - half, P + half], "levels": est.levels.tolist(),
                "stage_shares": est.stage_shares.mean(axis=0).tolist(), "path_steps": est.path_steps,
-               "brute_force_steps": est.brute_force_steps, "speedup": est.speedup, "clones": int(clones),
+               "brute_force_steps": est.brute_force_steps, "speedup": est.speedup, "cpu_seconds": est.cpu_time,
+               "replica_relative_variance": est.replica_relative_variance
+               if np.isfinite(est.replica_relative_variance) else None, "clones": int(clones),
                "replicas": int(replicas), "dt": float(dt), "scheme": scheme, "seed": int(seed),
                "seconds": time.perf_counter() - t0}
     t = np.array([0.0, float(t_max)])
