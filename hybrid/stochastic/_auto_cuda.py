@@ -416,9 +416,10 @@ class CudaRun:
         ny, nx = shapes["jhist"][0]
         self.lay = layout(self.n_obs, self.width, n_trans, a["v_bins"], (nx, ny), phases)
         sim = simulator_enabled()
+        self.max_registers = None if sim else max_registers_from_env(precision)
         src, st = generate_cuda_source(automaton, scheme, observables, convention, summed=summed, phases=phases > 0,
                                        lay=self.lay, precision=precision, cache=not sim,
-                                       max_registers=None if sim else max_registers_from_env())
+                                       max_registers=self.max_registers)
         self.source, self.n = src, len(st.states)
         where = "sim" if sim else "dev"
         self.name = f"vibro_auto_cuda_{scheme}_{precision}_{where}_{_auto_codegen.kernel_key(src)}"
@@ -517,7 +518,7 @@ class CudaRun:
         self._fill(rows, state, total)
         return {"scheduler": "cuda", "precision": self.precision, "rng": RNG, "threads_per_block": self.tpb,
                 "launch_steps": int(launch_steps), "device_seconds": time.perf_counter() - t_start,
-                "cuda_kernel": self.name}
+                "cuda_kernel": self.name, "max_registers": self.max_registers}
 
     def _check_memory(self, paths: int) -> None:
         """Refuse, with the estimate, per-path rows that do not fit in the device's memory (the simulator: 4 GB)."""
@@ -579,19 +580,29 @@ class CudaRun:
             rows["pcount"][:] = np.minimum(cp, paths - starts)[:, None] * per_path[None, :]
 
 
-def max_registers_from_env() -> int | None:
-    """``VIBRO_CUDA_MAX_REGISTERS`` as an int (unset, empty or 0: no cap; the compiler chooses).
+DEFAULT_MAX_REGISTERS = {"f64": 96, "f32": 64}
+"""The register cap per thread when ``VIBRO_CUDA_MAX_REGISTERS`` is unset. Measured on an H100 (2**20 paths x
+20,000 steps, benchmarks/gpu_throughput.py and docs/gpu.md): Example 1 in f64 ran at 3.3-3.6e10 path-steps/s with
+the compiler's 160 registers and 4.4-4.6e10 capped at 96; the impact pair 2.1e10 with 210 and 2.6e10 at 96; f32
+Example 1 3.8-4.5e10 with 138 and 4.8-4.9e10 at 64. The spills the caps cause cost less than the occupancy gained."""
+
+
+def max_registers_from_env(precision: str = "f64") -> int | None:
+    """The register cap of the device kernel: ``VIBRO_CUDA_MAX_REGISTERS`` as an int (0: no cap, the compiler
+    chooses), or :data:`DEFAULT_MAX_REGISTERS` of ``precision`` when the variable is unset or empty.
 
     Examples
     --------
     >>> import os; os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None) and None
-    >>> max_registers_from_env() is None
-    True
+    >>> max_registers_from_env("f64"), max_registers_from_env("f32")
+    (96, 64)
     """
     import os
 
     raw = os.environ.get("VIBRO_CUDA_MAX_REGISTERS", "").strip()
-    if not raw or raw == "0":
+    if not raw:
+        return DEFAULT_MAX_REGISTERS[precision]
+    if raw == "0":
         return None
     try:
         n = int(raw)
