@@ -406,7 +406,7 @@ def _warn_if_skewed(est: RareEventEstimate) -> None:
     if est.probability > 0 and rv <= SKEWED_REPLICAS and not dead:
         return
     more = clones * rv / (SKEWED_REPLICAS / 3) if math.isfinite(rv) and not dead else 10 * clones
-    warnings.warn(f"splitting: {dead} of {len(est.replicas)} replicas died out and one replica's relative variance "
-                  f"is {rv:.2g}; at such spread the 95 % interval undercovers (measured with 8 replicas: 88 % at "
-                  f"1.15, docs/results/rare-events.md). Use about {int(math.ceil(more))} clones or more",
-                  RareEventWarning, stacklevel=3)
+    died = f"{dead} of {len(est.replicas)} replicas died out; " if dead else ""
+    warnings.warn(f"splitting: {died}one replica's relative variance is {rv:.2g}; at such spread the 95 % interval "
+                  "undercovers (measured with 8 replicas: 88 % at 1.15, docs/results/rare-events.md). Use about "
+                  f"{int(math.ceil(more))} clones or more", RareEventWarning, stacklevel=3)
