@@ -14,11 +14,17 @@ Crossings are located on the step's own interpolant: for ``em`` and ``milstein``
 state before to the state after the step; for ``splitting``, ``symplectic`` and ``baoab`` the free flight of the
 positions at constant velocity, which *is* the scheme's position update, so the location is exact for guards of the
 positions. These three also move the velocities in sub-steps of their own at a fixed position and instant (kicks,
-noise, the velocities' Milstein step, BAOAB's O step); where a guard depends on a velocity (an energy level), its
-crossings there are located on the straight line in the velocities from the state before the sub-step to the state
-after it (``velocity_leg``), and the fast step reads such a guard after every sub-step, so that a kick that crosses
-it and a flight that crosses back are not missed. Only then does the source contain that code: the kernels of
-models whose guards are of the positions and time only are those they were, to the byte.
+noise, the velocities' Milstein step, BAOAB's O step), so their sub-step states pair the positions of one instant
+with the velocities of another (splitting's flight: the step end's positions with the middle's velocities, whose
+energy is high by about y V'(x) dt / 2). A guard that depends on a velocity (an energy level) is therefore read on
+consistent states only (``view_guard``): along each flight piece with the velocities moved linearly from those of
+its start (the step's start, before the opening sub-step; after a firing, the reset of the consistent state there)
+to those of its end (at the step's end after the closing kick; BAOAB's half step: the flight's own), the positions
+the flight's own; on BAOAB's O step at the half step; on splitting's noise, at the step's end, with the closing kick
+applied (``velocity_leg``). Its crossings are located on those states (``locate_view``), and the fast step reads it
+at the same points. The opening sub-step and the closing kick move no such reading. Only where a guard depends on a
+velocity does the source contain that code (:data:`_LOCATED_EVENTS`): the kernels of models whose guards are of the
+positions and time only are those they were, to the byte.
 A root is bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative
 tolerance of 1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at
 most ``MAX_EVENTS`` of them; the excess is counted and reported.
