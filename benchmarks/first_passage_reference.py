@@ -113,7 +113,8 @@ def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000, scheme="splittin
     tail, rate = tail_term(r.times, r.survival, r.paths)
     lo, hi = r.survival_interval()
     return {"H_c": H_c, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb, "t_max": t_max,
-            "scheme": scheme, "engine": ENGINE, "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
+            "scheme": scheme, "engine": ENGINE, "mean_censored_at_t_max": est.value, "mean": est.value + tail,
+            "ci95": est.ci,
             "tail": tail, "tail_rate": rate, "censored": r.censored, "times": r.times.tolist(),
             "R": r.survival.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
             "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - t0}

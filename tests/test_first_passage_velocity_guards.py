@@ -24,9 +24,9 @@ import warnings
 import numpy as np
 import pytest
 from scipy.optimize import brentq
+from test_automaton_velocity_guards import energy_chain
 
 from hybrid.stochastic import simulate_automaton
-from test_automaton_velocity_guards import energy_chain
 
 DT = 0.01
 _chain = functools.cache(energy_chain)
