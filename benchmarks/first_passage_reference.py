@@ -27,6 +27,8 @@ Monte Carlo survival itself over its last decade (that term is printed; it is un
     python benchmarks/first_passage_reference.py near H0 DT PATHS SEED [--uncorrected]     # R(t) from H0 < 2
     python benchmarks/first_passage_reference.py survival        # fpk R(t) against the Kaplan-Meier curves -> json
     python benchmarks/first_passage_reference.py compare         # fpk's default grid against the reference -> json
+    python benchmarks/first_passage_reference.py oracle          # a guard of the velocity, noise-free: error, order
+    python benchmarks/first_passage_reference.py trend           # the fit T0 + k dt of each level's runs
 
 Each run appends one JSON line to ``benchmarks/data/first_passage_mc_runs.jsonl`` (paths, dt, seed, t_max, the
 mean with its 95 % CI, censored paths, the tail term, R(t) at 200 times with Wilson intervals, CPU and wall s).
@@ -54,6 +56,7 @@ SURVIVAL = DATA / "first_passage_survival.json"
 NEAR = DATA / "first_passage_mc_near_level.jsonl"
 COMPARE = DATA / "first_passage_fpk_vs_reference.json"
 BETA = 0.5826  # -zeta(1/2)/sqrt(2 pi)
+Z95 = 1.959963984540054  # a 95 % half-width in standard errors
 LEVELS = (0.25, 0.5, 1.0, 1.5, 2.0)
 T_MAX = {0.25: 60.0, 0.5: 120.0, 1.0: 300.0, 1.5: 450.0, 2.0: 800.0}  # R(t_max) below 1e-3 (fpk's decay rates)
 SNAPSHOTS = 200
@@ -64,11 +67,12 @@ at H_c = 2 and dt = 0.01). The reference uses the tagged runs only; the older on
 # (H_c, dt, paths, seed): the runs behind the stored reference, all with ENGINE (seeds differ between every pair of
 # runs; the replicate pairs, same level and step, test the CIs). The runs before ENGINE (seeds 101-509, 601) stay in
 # the runs file: their level was read on half-kicked states.
-PLAN = [(0.25, 0.01, 100_000, 131), (0.25, 0.005, 60_000, 132),
+PLAN = [(0.25, 0.01, 50_000, 131), (0.25, 0.01, 50_000, 133), (0.25, 0.005, 60_000, 132),
         (0.5, 0.01, 30_000, 231), (0.5, 0.01, 30_000, 233), (0.5, 0.005, 30_000, 232), (0.5, 0.005, 30_000, 234),
         (1.0, 0.01, 30_000, 331), (1.0, 0.01, 30_000, 333), (1.0, 0.005, 30_000, 332), (1.0, 0.005, 30_000, 334),
-        (1.5, 0.02, 30_000, 431), (1.5, 0.02, 30_000, 433), (1.5, 0.01, 30_000, 432), (1.5, 0.01, 30_000, 434),
-        (2.0, 0.02, 40_000, 521), (2.0, 0.01, 40_000, 522), (2.0, 0.02, 40_000, 523), (2.0, 0.01, 40_000, 524)]
+        (1.5, 0.01, 30_000, 432), (1.5, 0.01, 30_000, 434), (1.5, 0.005, 30_000, 431), (1.5, 0.005, 30_000, 433),
+        (2.0, 0.02, 40_000, 521), (2.0, 0.01, 40_000, 522), (2.0, 0.02, 40_000, 523), (2.0, 0.01, 40_000, 524),
+        (2.0, 0.02, 40_000, 525), (2.0, 0.01, 40_000, 526), (2.0, 0.02, 40_000, 527), (2.0, 0.01, 40_000, 528)]
 # checks outside the reference: scheme baoab at H_c = 2 (run 2.0 0.005 20000 601 --scheme baoab), and R(t) from
 # H = 1.9 at three steps, corrected and not (near 1.9 DT 100000 SEED [--uncorrected], seeds 701-706)
 # the uncorrected level at H_c = 0.25 (the continuity correction's check): (dt, paths, seed)
@@ -145,13 +149,14 @@ def scatter_factor(runs):
     """sqrt(chi2 / dof) of the replicate runs (same level and step) about their pooled mean, at least 1.
 
     Replicates that scatter more than their CIs say would widen every CI of the reference by this factor (the
-    Birge ratio); measured: chi2 6.6 on 7 degrees of freedom, factor 1."""
+    Birge ratio). The weights are 1 / sigma^2 with sigma = ci95 / 1.96 (the runs before ENGINE were weighted by
+    1 / ci95^2, which made chi2 3.84 times too small: their 6.6 on 7 degrees of freedom was 25.4)."""
     chi2, dof = 0.0, 0
     for key in {(r["H_c"], r["dt"]) for r in runs}:
         group = [r for r in runs if (r["H_c"], r["dt"]) == key]
         if len(group) < 2:
             continue
-        w = np.array([1 / r["ci95"] ** 2 for r in group])
+        w = np.array([(Z95 / r["ci95"]) ** 2 for r in group])
         m = np.array([r["mean"] for r in group])
         chi2 += float(np.sum(w * (m - np.sum(w * m) / np.sum(w)) ** 2))
         dof += len(group) - 1
@@ -278,8 +283,50 @@ def compare():
     COMPARE.write_text(json.dumps(out, indent=1) + "\n")
 
 
+def oracle(dts=(0.04, 0.02, 0.01, 0.005), x0=-0.8, speed=0.5):
+    """The reading of a guard of the velocity inside the step, noise-free: the reference runs' guard
+    H + kb |y| < h_c with kb = 1 on the free linear oscillator (b = 0, c = 0, D = 0, walls at +-10) from (x0, 0),
+    H = x0^2 / 2 constant, so it fires where `|y|` = h_c - H = speed: at arcsin(speed / `|x0|`) exactly. Prints each
+    scheme's error per step and the log-log slope of `|error|` against dt (its order)."""
+    from hybrid.stochastic import simulate_first_passage
+
+    exact = math.asin(speed / abs(x0))
+    for scheme in ("splitting", "baoab", "symplectic"):
+        errors = []
+        for dt in dts:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                r = simulate_first_passage(example1(), "H + kb*abs(y) < hc", scheme, dt=dt, paths=1, t_max=2.0,
+                                           x0=(x0, 0.0), seed=1, check_dt=False, snapshots=10, time_bins=100,
+                                           chunk_paths=1, params={"hc": x0 * x0 / 2 + speed, "kb": 1.0, "c": 0.0,
+                                                                  "D": 0.0, "b": 0.0, "delta": 10.0})
+            errors.append(r.ensemble.mean("exit_time").value - exact)  # the parked mark: the located time
+        slope = np.polyfit(np.log(dts), np.log(np.abs(errors)), 1)[0]
+        print(json.dumps({"scheme": scheme, "dt": list(dts), "error": errors, "order": slope}), flush=True)
+
+
+def trend():
+    """Per level, the weighted fit T0 + k dt through the reference's runs at their steps (ENGINE): k, the
+    first-order step error left, with its 95 % CI."""
+    runs = [r for r in load_runs() if r["corrected"] and r.get("scheme", "splitting") == "splitting"
+            and r.get("engine") == ENGINE]
+    for H_c in LEVELS:
+        rows = [r for r in runs if r["H_c"] == H_c]
+        if len({r["dt"] for r in rows}) < 2:
+            continue
+        dt = np.array([r["dt"] for r in rows])
+        m = np.array([r["mean"] for r in rows])
+        w = (Z95 / np.array([r["ci95"] for r in rows])) ** 2
+        A = np.vstack([np.ones_like(dt), dt]).T
+        cov = np.linalg.inv(A.T @ (w[:, None] * A))
+        T0, k = cov @ (A.T @ (w * m))
+        print(json.dumps({"H_c": H_c, "T0": T0, "T0_ci95": Z95 * math.sqrt(cov[0, 0]), "k": k,
+                          "k_ci95": Z95 * math.sqrt(cov[1, 1]), "k_dt_relative_at_0.01": k * 0.01 / T0}), flush=True)
+
+
 def main(argv):
-    if not argv or argv[0] not in ("run", "plan", "reference", "validate", "survival", "near", "compare"):
+    if not argv or argv[0] not in ("run", "plan", "reference", "validate", "survival", "near", "compare",
+                                        "oracle", "trend"):
         print(__doc__)
         return 2
     if argv[0] == "plan":
@@ -296,6 +343,12 @@ def main(argv):
         return 0
     if argv[0] == "compare":
         compare()
+        return 0
+    if argv[0] == "oracle":
+        oracle()
+        return 0
+    if argv[0] == "trend":
+        trend()
         return 0
     if argv[0] == "validate":
         rows = [r for r in load_runs() if r["H_c"] == 0.25]
