@@ -137,6 +137,7 @@ def near_level(H0, dt, paths, seed, corrected=True, H_c=2.0, t_max=5.0, snapshot
                                    time_bins=10 * snapshots, params={"hc": H_c, "kb": kb}, chunk_paths=1000)
     lo, hi = r.survival_interval()
     return {"H_c": H_c, "H0": H0, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb,
+            "engine": ENGINE,
             "t_max": t_max, "times": r.times.tolist(), "R": r.survival.tolist(), "R_lo": lo.tolist(),
             "R_hi": hi.tolist(), "cpu_seconds": time.process_time() - c0}
 
