@@ -5,7 +5,8 @@ Results in docs/results/first-passage-spectra.md; the reference is stored in
 
 Example 1 (Duffing a = 1, b = 0.2, c = 0.025, D = 0.05, walls at +-1, Ma V_C = 0.4) from rest; T = first time
 H >= H_c. Event-exact Monte Carlo (``simulate_first_passage``, scheme ``splitting``): the walls and the level are
-located inside the step, but the noise enters once per step, so H, which carries noise (dH has the diffusion
+located inside the step (the level, a guard of the velocity, on states whose position and velocity belong to one
+instant: ``ENGINE``), but the noise enters once per step, so H, which carries noise (dH has the diffusion
 sqrt(2 D) |y| dW), is watched at the step ends only, and a path that crosses H_c and comes back inside one step is
 missed: the passage comes late by O(sqrt(dt)) (2-4 % at dt = 0.002-0.01). The run therefore watches the moved level
 
@@ -14,8 +15,8 @@ missed: the passage comes late by O(sqrt(dt)) (2-4 % at dt = 0.002-0.01). The ru
 the continuity correction of a discretely watched diffusion (Broadie, Glasserman and Kou 1997; the local noise
 intensity of H at the crossing is sqrt(2 D) |y|), which leaves an O(dt) error in theory. Checks: at H_c = 0.25 the
 uncorrected runs at three steps approach the corrected value as sqrt(dt) (``validate``), and at every level the
-corrected runs at two or three steps are compared (``reference`` prints each step's difference from the finest with
-its CI): where a difference exceeds its CI (H_c = 1.5), the finest step alone is the reference.
+corrected runs at two steps are compared (``reference`` prints each step's difference from the finest with its CI):
+where a difference exceeds its CI, the finest step alone is the reference.
 
 Paths still inside at t_max are counted; the mean adds their tail R(t_max) / lambda, lambda the log-slope of the
 Monte Carlo survival itself over its last decade (that term is printed; it is under 0.1 % of the mean).
@@ -25,6 +26,9 @@ Monte Carlo survival itself over its last decade (that term is printed; it is un
     python benchmarks/first_passage_reference.py reference                                # combine -> json, table
     python benchmarks/first_passage_reference.py near H0 DT PATHS SEED [--uncorrected]     # R(t) from H0 < 2
     python benchmarks/first_passage_reference.py survival        # fpk R(t) against the Kaplan-Meier curves -> json
+    python benchmarks/first_passage_reference.py compare         # fpk's default grid against the reference -> json
+    python benchmarks/first_passage_reference.py oracle          # a guard of the velocity, noise-free: error, order
+    python benchmarks/first_passage_reference.py trend           # the fit T0 + k dt of each level's runs
 
 Each run appends one JSON line to ``benchmarks/data/first_passage_mc_runs.jsonl`` (paths, dt, seed, t_max, the
 mean with its 95 % CI, censored paths, the tail term, R(t) at 200 times with Wilson intervals, CPU and wall s).
@@ -50,17 +54,25 @@ RUNS = DATA / "first_passage_mc_runs.jsonl"
 REFERENCE = DATA / "first_passage_reference.json"
 SURVIVAL = DATA / "first_passage_survival.json"
 NEAR = DATA / "first_passage_mc_near_level.jsonl"
+COMPARE = DATA / "first_passage_fpk_vs_reference.json"
 BETA = 0.5826  # -zeta(1/2)/sqrt(2 pi)
+Z95 = 1.959963984540054  # a 95 % half-width in standard errors
 LEVELS = (0.25, 0.5, 1.0, 1.5, 2.0)
 T_MAX = {0.25: 60.0, 0.5: 120.0, 1.0: 300.0, 1.5: 450.0, 2.0: 800.0}  # R(t_max) below 1e-3 (fpk's decay rates)
 SNAPSHOTS = 200
-# (H_c, dt, paths, seed): the runs behind the stored reference (seeds differ between every pair of runs)
-PLAN = [(0.25, 0.01, 100_000, 101), (0.25, 0.005, 60_000, 102), (0.5, 0.01, 24_000, 201), (0.5, 0.005, 24_000, 202),
-        (1.0, 0.01, 24_000, 301), (1.0, 0.005, 24_000, 302), (1.5, 0.01, 24_000, 401), (1.5, 0.005, 24_000, 402),
-        (1.5, 0.0025, 24_000, 403), (1.5, 0.0025, 24_000, 404),
-        (2.0, 0.01, 30_000, 501), (2.0, 0.005, 15_000, 502), (2.0, 0.005, 15_000, 503), (2.0, 0.0025, 15_000, 504),
-        (2.0, 0.005, 20_000, 505), (0.5, 0.005, 110_000, 205), (2.0, 0.0025, 15_000, 509), (2.0, 0.005, 20_000, 506),
-        (1.0, 0.005, 110_000, 305)]
+ENGINE = "consistent-velocity-guards"
+"""The engine a run was made with: before this tag (runs without it) the splitting schemes read a guard of the
+velocities, such as the level of H, on their half-kicked sub-step states, so exits fired early by O(dt) (about 1 %
+at H_c = 2 and dt = 0.01). The reference uses the tagged runs only; the older ones stay in the runs file."""
+# (H_c, dt, paths, seed): the runs behind the stored reference, all with ENGINE (seeds differ between every pair of
+# runs; the replicate pairs, same level and step, test the CIs). The runs before ENGINE (seeds 101-509, 601) stay in
+# the runs file: their level was read on half-kicked states.
+PLAN = [(0.25, 0.01, 50_000, 131), (0.25, 0.01, 50_000, 133), (0.25, 0.005, 60_000, 132),
+        (0.5, 0.01, 30_000, 231), (0.5, 0.01, 30_000, 233), (0.5, 0.005, 30_000, 232), (0.5, 0.005, 30_000, 234),
+        (1.0, 0.01, 30_000, 331), (1.0, 0.01, 30_000, 333), (1.0, 0.005, 30_000, 332), (1.0, 0.005, 30_000, 334),
+        (1.5, 0.01, 30_000, 432), (1.5, 0.01, 30_000, 434), (1.5, 0.005, 30_000, 431), (1.5, 0.005, 30_000, 433),
+        (2.0, 0.02, 40_000, 521), (2.0, 0.01, 40_000, 522), (2.0, 0.02, 40_000, 523), (2.0, 0.01, 40_000, 524),
+        (2.0, 0.02, 40_000, 525), (2.0, 0.01, 40_000, 526), (2.0, 0.02, 40_000, 527), (2.0, 0.01, 40_000, 528)]
 # checks outside the reference: scheme baoab at H_c = 2 (run 2.0 0.005 20000 601 --scheme baoab), and R(t) from
 # H = 1.9 at three steps, corrected and not (near 1.9 DT 100000 SEED [--uncorrected], seeds 701-706)
 # the uncorrected level at H_c = 0.25 (the continuity correction's check): (dt, paths, seed)
@@ -105,7 +117,8 @@ def run(H_c, dt, paths, seed, corrected=True, chunk_paths=1000, scheme="splittin
     tail, rate = tail_term(r.times, r.survival, r.paths)
     lo, hi = r.survival_interval()
     return {"H_c": H_c, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb, "t_max": t_max,
-            "scheme": scheme, "mean_censored_at_t_max": est.value, "mean": est.value + tail, "ci95": est.ci,
+            "scheme": scheme, "engine": ENGINE, "mean_censored_at_t_max": est.value, "mean": est.value + tail,
+            "ci95": est.ci,
             "tail": tail, "tail_rate": rate, "censored": r.censored, "times": r.times.tolist(),
             "R": r.survival.tolist(), "R_lo": lo.tolist(), "R_hi": hi.tolist(),
             "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - t0}
@@ -124,6 +137,7 @@ def near_level(H0, dt, paths, seed, corrected=True, H_c=2.0, t_max=5.0, snapshot
                                    time_bins=10 * snapshots, params={"hc": H_c, "kb": kb}, chunk_paths=1000)
     lo, hi = r.survival_interval()
     return {"H_c": H_c, "H0": H0, "dt": dt, "paths": paths, "seed": seed, "corrected": corrected, "kb": kb,
+            "engine": ENGINE,
             "t_max": t_max, "times": r.times.tolist(), "R": r.survival.tolist(), "R_lo": lo.tolist(),
             "R_hi": hi.tolist(), "cpu_seconds": time.process_time() - c0}
 
@@ -136,13 +150,14 @@ def scatter_factor(runs):
     """sqrt(chi2 / dof) of the replicate runs (same level and step) about their pooled mean, at least 1.
 
     Replicates that scatter more than their CIs say would widen every CI of the reference by this factor (the
-    Birge ratio); measured: chi2 6.6 on 7 degrees of freedom, factor 1."""
+    Birge ratio). The weights are 1 / sigma^2 with sigma = ci95 / 1.96 (the runs before ENGINE were weighted by
+    1 / ci95^2, which made chi2 3.84 times too small: their 6.6 on 7 degrees of freedom was 25.4)."""
     chi2, dof = 0.0, 0
     for key in {(r["H_c"], r["dt"]) for r in runs}:
         group = [r for r in runs if (r["H_c"], r["dt"]) == key]
         if len(group) < 2:
             continue
-        w = np.array([1 / r["ci95"] ** 2 for r in group])
+        w = np.array([(Z95 / r["ci95"]) ** 2 for r in group])
         m = np.array([r["mean"] for r in group])
         chi2 += float(np.sum(w * (m - np.sum(w * m) / np.sum(w)) ** 2))
         dof += len(group) - 1
@@ -167,7 +182,8 @@ def reference():
     alone. R(t) of the same runs pooled, with its Wilson interval. Writes REFERENCE."""
     from hybrid.stochastic._passage import _wilson
 
-    runs = [r for r in load_runs() if r["corrected"] and r.get("scheme", "splitting") == "splitting"]
+    runs = [r for r in load_runs() if r["corrected"] and r.get("scheme", "splitting") == "splitting"
+            and r.get("engine") == ENGINE]
     scatter = scatter_factor(runs)
     out = {"model": "Example 1: DuffingImpact a=1 b=0.2 c=0.025 D=0.05 walls +-1, Ma(vc=0.4); start (0, 0)",
            "quantity": "mean first time with H >= H_c",
@@ -241,8 +257,77 @@ def survival(grids=((60, 64), (120, 128)), steps=2000):
     SURVIVAL.write_text(json.dumps(out, indent=1) + "\n")
 
 
+def compare():
+    """fpk on its default grid (120 x 128) with its error estimate against the stored reference at every level:
+    the error, the estimate, whether the gap is within estimate + CI and within 1 %, and fpk's CPU s. Writes
+    COMPARE."""
+    from averaging.phase_plane import first_passage_fpk
+
+    model = DuffingImpact(restitution=Ma(vc=0.4))
+    levels = json.loads(REFERENCE.read_text())["levels"]
+    out = {"script": "benchmarks/first_passage_reference.py compare", "grid": "default (120 x 128), check=True",
+           "levels": {}}
+    for H_c in LEVELS:
+        ref = levels[str(H_c)]
+        c0 = time.process_time()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the estimate's size is in the row
+            r = first_passage_fpk(model, f"H < {H_c}", check=True, survival=False)
+        cpu = time.process_time() - c0
+        gap = r.mean_time - ref["mean"]
+        row = {"fpk": r.mean_time, "error_estimate": r.error_estimate, "reference": ref["mean"],
+               "reference_ci95": ref["ci95"], "error": gap, "relative_error": gap / ref["mean"],
+               "within_estimate_and_ci": abs(gap) <= r.error_estimate + ref["ci95"],
+               "within_1_percent": abs(gap) <= 0.01 * ref["mean"], "cpu_seconds": cpu}
+        out["levels"][str(H_c)] = row
+        print(json.dumps({str(H_c): row}), flush=True)
+    COMPARE.write_text(json.dumps(out, indent=1) + "\n")
+
+
+def oracle(dts=(0.04, 0.02, 0.01, 0.005), x0=-0.8, speed=0.5):
+    """The reading of a guard of the velocity inside the step, noise-free: the reference runs' guard
+    H + kb |y| < h_c with kb = 1 on the free linear oscillator (b = 0, c = 0, D = 0, walls at +-10) from (x0, 0),
+    H = x0^2 / 2 constant, so it fires where `|y|` = h_c - H = speed: at arcsin(speed / `|x0|`) exactly. Prints each
+    scheme's error per step and the log-log slope of `|error|` against dt (its order)."""
+    from hybrid.stochastic import simulate_first_passage
+
+    exact = math.asin(speed / abs(x0))
+    for scheme in ("splitting", "baoab", "symplectic"):
+        errors = []
+        for dt in dts:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                r = simulate_first_passage(example1(), "H + kb*abs(y) < hc", scheme, dt=dt, paths=1, t_max=2.0,
+                                           x0=(x0, 0.0), seed=1, check_dt=False, snapshots=10, time_bins=100,
+                                           chunk_paths=1, params={"hc": x0 * x0 / 2 + speed, "kb": 1.0, "c": 0.0,
+                                                                  "D": 0.0, "b": 0.0, "delta": 10.0})
+            errors.append(r.ensemble.mean("exit_time").value - exact)  # the parked mark: the located time
+        slope = np.polyfit(np.log(dts), np.log(np.abs(errors)), 1)[0]
+        print(json.dumps({"scheme": scheme, "dt": list(dts), "error": errors, "order": slope}), flush=True)
+
+
+def trend():
+    """Per level, the weighted fit T0 + k dt through the reference's runs at their steps (ENGINE): k, the
+    first-order step error left, with its 95 % CI."""
+    runs = [r for r in load_runs() if r["corrected"] and r.get("scheme", "splitting") == "splitting"
+            and r.get("engine") == ENGINE]
+    for H_c in LEVELS:
+        rows = [r for r in runs if r["H_c"] == H_c]
+        if len({r["dt"] for r in rows}) < 2:
+            continue
+        dt = np.array([r["dt"] for r in rows])
+        m = np.array([r["mean"] for r in rows])
+        w = (Z95 / np.array([r["ci95"] for r in rows])) ** 2
+        A = np.vstack([np.ones_like(dt), dt]).T
+        cov = np.linalg.inv(A.T @ (w[:, None] * A))
+        T0, k = cov @ (A.T @ (w * m))
+        print(json.dumps({"H_c": H_c, "T0": T0, "T0_ci95": Z95 * math.sqrt(cov[0, 0]), "k": k,
+                          "k_ci95": Z95 * math.sqrt(cov[1, 1]), "k_dt_relative_at_0.01": k * 0.01 / T0}), flush=True)
+
+
 def main(argv):
-    if not argv or argv[0] not in ("run", "plan", "reference", "validate", "survival", "near"):
+    if not argv or argv[0] not in ("run", "plan", "reference", "validate", "survival", "near", "compare",
+                                        "oracle", "trend"):
         print(__doc__)
         return 2
     if argv[0] == "plan":
@@ -256,6 +341,15 @@ def main(argv):
         return 0
     if argv[0] == "survival":
         survival()
+        return 0
+    if argv[0] == "compare":
+        compare()
+        return 0
+    if argv[0] == "oracle":
+        oracle()
+        return 0
+    if argv[0] == "trend":
+        trend()
         return 0
     if argv[0] == "validate":
         rows = [r for r in load_runs() if r["H_c"] == 0.25]

@@ -14,11 +14,17 @@ Crossings are located on the step's own interpolant: for ``em`` and ``milstein``
 state before to the state after the step; for ``splitting``, ``symplectic`` and ``baoab`` the free flight of the
 positions at constant velocity, which *is* the scheme's position update, so the location is exact for guards of the
 positions. These three also move the velocities in sub-steps of their own at a fixed position and instant (kicks,
-noise, the velocities' Milstein step, BAOAB's O step); where a guard depends on a velocity (an energy level), its
-crossings there are located on the straight line in the velocities from the state before the sub-step to the state
-after it (``velocity_leg``), and the fast step reads such a guard after every sub-step, so that a kick that crosses
-it and a flight that crosses back are not missed. Only then does the source contain that code: the kernels of
-models whose guards are of the positions and time only are those they were, to the byte.
+noise, the velocities' Milstein step, BAOAB's O step), so their sub-step states pair the positions of one instant
+with the velocities of another (splitting's flight: the step end's positions with the middle's velocities, whose
+energy is high by about y V'(x) dt / 2). A guard that depends on a velocity (an energy level) is therefore read on
+consistent states only (``view_guard``): along each flight piece with the velocities moved linearly from those of
+its start (the step's start, before the opening sub-step; after a firing, the reset of the consistent state there)
+to those of its end (at the step's end after the closing kick; BAOAB's half step: the flight's own), the positions
+the flight's own; on BAOAB's O step at the half step; on splitting's noise, at the step's end, with the closing kick
+applied (``velocity_leg``). Its crossings are located on those states (``locate_view``), and the fast step reads it
+at the same points. The opening sub-step and the closing kick move no such reading. Only where a guard depends on a
+velocity does the source contain that code (:data:`_LOCATED_EVENTS`): the kernels of models whose guards are of the
+positions and time only are those they were, to the byte.
 A root is bracketed by the sign change and found by the Illinois (modified regula falsi) method to a relative
 tolerance of 1e-13 of the step, at most 100 iterations. Several events in one step are handled in time order, at
 most ``MAX_EVENTS`` of them; the excess is counted and reported.
@@ -361,10 +367,11 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
     code_t1 = {sp.Symbol("t"): t1}
     to_y = {sp.Symbol(f"_x{i}"): ys[i] for i in range(n)}
     vel = sorted({v for _, v in st.pairs})
-    to_v = {sp.Symbol(f"_x{v}"): ys[v] for v in vel}  # after a velocity sub-step at the start: positions still _x
     leaving = [j for j, tr in enumerate(st.transitions) if tr.source == st.modes[k]]
-    # guards of the velocities are also read after each sub-step that moves only the velocities (kick, noise, O);
-    # the sub-steps after the flight then run before the test instead of after the commit
+    # guards of the velocities are read on states whose positions and velocities belong to one instant, as in the
+    # event loop: at the end of the flight with the closing kick applied (splitting: without the noise), after
+    # BAOAB's O step at the half step, and at the step's end; the sub-steps after the flight then run before the
+    # test instead of after the commit
     moving = [j for j in leaving if moved[j]]
     before = {j: [] for j in leaving}  # the names of a guard's values before the end of the flight, in order
     later = {j: [] for j in leaving}  # and after it
@@ -376,13 +383,14 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
             block(out, [f"_{tag}{j}"], [st.transitions[j].guard], f"{tag}{j}_", extra)
             into[j].append(f"_{tag}{j}")
 
-    def closing(targets, exprs, name, tag):
+    def closing(targets, exprs, name, tag, last=True):
         """A sub-step ``_y += exprs`` (into ``_{name}*``) at the end of the step: after the commit, or before the
-        test (``post``) and followed by a reading ``_g{name}*`` of the guards of the velocities."""
+        test (``post``), the ``last`` one followed by a reading ``_g{name}*`` of the guards of the velocities."""
         if moving:
             block(post, [f"_{name}{i}" for i in targets], exprs, tag, {**to_y, **code_t1})
             post.extend(f"_y{i} = _y{i} + _{name}{i}" for i in targets)
-            read(post, f"g{name}", moving, {**to_y, **code_t1}, later)
+            if last:
+                read(post, f"g{name}", moving, {**to_y, **code_t1}, later)
         else:
             block(commit, [f"_{name}{i}" for i in targets], exprs, tag, code_t1)
             commit.extend(f"_x{i} += _{name}{i}" for i in targets)
@@ -392,7 +400,6 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
         code_tm = {sp.Symbol("t"): tm}
         lines.append("_tm = t + hdt")
         block(lines, [f"_y{v}" for v, _, _ in parts], [xs[v] + hdt * F for v, F, _ in parts], "a")
-        read(lines, "ga", moving, to_v, before)
         lines.extend(f"_y{q} = _x{q} + hdt * _y{v}" for q, v in st.pairs)
         read(lines, "m", leaving, {**to_y, **code_tm}, before)  # the guards at the half step, g(mid)
         for v, _, c in parts:  # O: exact OU step of each velocity at the half step's positions
@@ -415,14 +422,23 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
             block(lines, [f"_y{i}" for i in vel], [xs[i] + dt / 2 * f[i] for i in vel], "a")
             # the noise and the closing kick at the end of the step (as in the event loop)
             noisy = [i for i in range(n) if any(G[i, j] != 0 for j in range(m))]
-            closing(noisy, [sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0) for i in noisy], "n", "n")
+            closing(noisy, [sum(G[i, j] * w[j] for j in range(m) if G[i, j] != 0) for i in noisy], "n", "n",
+                    last=False)
             closing(vel, [dt / 2 * f[i] for i in vel], "k", "b")
-        read(lines, "ga", moving, to_v, before)
         lines.extend(f"_y{q} = _x{q} + dt * _y{v}" for q, v in st.pairs)
+    # a guard of the velocities at the end of the flight: splitting's state there with the closing kick applied
+    # (its velocities are those of the middle of the step); BAOAB's is read after its closing kick only
+    to_u = dict(to_y)
+    if moving and scheme == "splitting":
+        block(lines, [f"_u{v}" for v in vel], [xs[v] + dt / 2 * f[v] for v in vel], "u", {**to_y, **code_t1})
+        to_u.update({sp.Symbol(f"_x{v}"): sp.Symbol(f"_u{v}") for v in vel})
     quiet = ["not track"]  # the conditions under which no guard can have fired in the step
     for j in leaving:
-        block(lines, [f"_g{j}"], [st.transitions[j].guard], f"g{j}_", {**to_y, **code_t1})
-        values = before[j] + [f"_g{j}"] + later[j]  # a guard's values after each sub-step that moves it
+        if moved[j] and scheme == "baoab":
+            values = before[j] + later[j]
+        else:
+            block(lines, [f"_g{j}"], [st.transitions[j].guard], f"g{j}_", {**to_u, **code_t1})
+            values = before[j] + [f"_g{j}"] + later[j]  # a guard's values after each sub-step that moves it
         d = int(st.transitions[j].direction)
         if d > 0:
             quiet.extend(f"{g} < 0.0" for g in values)
@@ -537,7 +553,8 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         reload=ind("\n".join(f"_L{i}[_l] = x[{i}]" for i in range(n)), " " * 16),
         store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
     )
-    src = (_TEMPLATE if template is None else template).format(
+    template = _TEMPLATE if template is None else template
+    src = (_located(template) if located else template).format(
         **(fields or {}),
         unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines() + [
             f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
@@ -1272,47 +1289,170 @@ def _velocity_leg_call(kind: str, when: str) -> str:
             "iw, fw, ws, elog, n_ev)")
 
 
-# the same sub-steps where a guard depends on a velocity: each through velocity_leg, which locates its crossings
-_LOCATED_OPENING = f"""\
-n_ev = np.int64(0)  # np.int64: not literals, so that velocity_leg is compiled once (as for kind)
-if SCHEME == 2:
-    # kick: velocities by half the drift
-    {_velocity_leg_call("KICK", "t")}
-elif SCHEME == 4:
-    # BAOAB: kick by the force (the drift without its damping); half flight, O, half flight below; kick
-    {_velocity_leg_call("FORCE_KICK", "t")}
-elif SCHEME == 3:
-    # symplectic: the velocities' whole Milstein step first (drift, noise and its correction at the start)
-    {_velocity_leg_call("MILSTEIN", "t")}"""
+# where a guard depends on a velocity: the opening sub-step is the plain one (no guard is read on its state, whose
+# velocities are those of another instant than its positions: the flight reads it from the velocities at the step's
+# start); n_ev as np.int64, not a literal, so that velocity_leg is compiled once
+_LOCATED_OPENING = _PLAIN_OPENING.replace("n_ev = 0", "n_ev = np.int64(0)")
 
 
 _LOCATED_O_STEP = _velocity_leg_call("OU", "t")
 
 
-_LOCATED_CLOSING = f"""\
-if SCHEME == 2:
-    # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
+# splitting's noise is located on the states the closing kick makes of the line (velocity_leg); the closing kick
+# then moves no guard of the velocities on those states
+_LOCATED_CLOSING = _PLAIN_CLOSING.replace("""\
+    model(F_NOISE, mode, x, t_end, p, G)
+    for i in range(N):
+        acc = 0.0
+        for k in range(M):
+            acc += G[i * M + k] * dw[k]
+        x[i] += acc
+""", f"""\
     {_velocity_leg_call("NOISE", "t_end")}
-    {_velocity_leg_call("KICK", "t_end")}
-elif SCHEME == 4:
-    {_velocity_leg_call("FORCE_KICK", "t_end")}"""
+""")
+
+
+# the event loop where a guard depends on a velocity: such a guard reads the flight's states with the velocities of
+# their own instant (the work array's last 4 N numbers: ua, ub, the state read and a drift)
+_LOCATED_EVENTS = (
+    ("WORK = 6 * N + N * M + N * M * M\n",
+     "WORK = 6 * N + N * M + N * M * M + 4 * N  # and the consistent states of the guards of the velocities\n"),
+    ("    t_step = t\n",
+     """    t_step = t
+    ua = ws[WORK - 4 * N:WORK - 3 * N]  # the velocities of a flight piece's start, at its instant
+    ub = ws[WORK - 3 * N:WORK - 2 * N]  # and of its end
+    xv = ws[WORK - 2 * N:WORK - N]
+    fv = ws[WORK - N:WORK]
+    for i in range(N):
+        ua[i] = x[i]  # the step's start, before the opening sub-step
+"""),
+    ("        frac = 1.0  # share of the leg still to run\n",
+     """        frac = 1.0  # share of the leg still to run
+        if leg == 1:  # BAOAB's second half flight starts from the O step's state, at the half step
+            for i in range(N):
+                ua[i] = x[i]
+"""),
+    ("""            best_s = 2.0
+            for jj in range(COUNT[mode]):
+                j = FIRST[mode] + jj
+                g0 = model(F_GUARD, j, xa, t, p, xa)
+                g1 = model(F_GUARD, j, xb, t + tau, p, xb)
+""", """            best_s = 2.0
+            # the velocities at the end of the flight piece, at its instant: after the closing kick (splitting:
+            # without the noise, which velocity_leg adds) at the step's end, the flight's own at BAOAB's half step
+            for i in range(N):
+                ub[i] = xb[i]
+            if SCHEME == 2 or (SCHEME == 4 and leg == 1):
+                model(F_DRIFT if SCHEME == 2 else F_BFORCE, mode, xb, t_end, p, fv)
+                for k in range(N_POS):
+                    ub[VEL[k]] = xb[VEL[k]] + 0.5 * dt * fv[VEL[k]]
+            for jj in range(COUNT[mode]):
+                j = FIRST[mode] + jj
+                if VGUARD[j] == 1:  # from ua to ub along the flight, the positions the flight's own
+                    g0 = view_guard(j, mode, xa, ua, ub, 0.0, t, dt, p, True, False, xv, fv)
+                    g1 = view_guard(j, mode, xb, ua, ub, 1.0, t + tau, dt, p, True, False, xv, fv)
+                else:
+                    g0 = model(F_GUARD, j, xa, t, p, xa)
+                    g1 = model(F_GUARD, j, xb, t + tau, p, xb)
+"""),
+    ("""                    sj = locate(j, xa, va, xb, t, tau, p, free_flight, g0, g1, xs)
+""", """                    if VGUARD[j] == 1:
+                        sj = locate_view(j, mode, xa, va, xb, ua, ub, t, tau, dt, p, free_flight, True, False, g0,
+                                         g1, xs, xv, fv)
+                    else:
+                        sj = locate(j, xa, va, xb, t, tau, p, free_flight, g0, g1, xs)
+"""),
+    ("""{fire}
+            t += best_s * tau
+""", """            # the next piece's velocities at its start: the reset of the consistent state at the firing
+            for i in range(N):
+                xv[i] = xs[i]
+            for k in range(N_POS):
+                xv[VEL[k]] = ua[VEL[k]] + best_s * (ub[VEL[k]] - ua[VEL[k]])
+            model(F_RESET, best, xv, t + best_s * tau, p, ua)
+{fire}
+            t += best_s * tau
+"""),
+)
+
+
+def _located(template: str) -> str:
+    """``template`` (the CPU module's or the device's) with the event loop of :data:`_LOCATED_EVENTS`."""
+    for old, new in _LOCATED_EVENTS:
+        if template.count(old) != 1:
+            raise AssertionError(f"the event template changed: {old!r}")
+        template = template.replace(old, new)
+    return template
 
 
 _VELOCITY_LEG = '''\
-KICK, FORCE_KICK, NOISE, MILSTEIN, OU = 0, 1, 2, 3, 4  # the sub-steps that move the velocities only
+NOISE, OU = 2, 4  # the sub-steps that move the velocities only and are located: splitting's noise, BAOAB's O
 VGUARD = np.array({vguards}, dtype=np.int64)  # 1 where the guard depends on a velocity
+
+
+@nb.njit(cache=CACHE)
+def view_guard(j, mode, xs, ua, ub, s, t, dt, p, lin, kicked, xv, fv):
+    """Guard j of the velocities on the state ``xs`` read with velocities of its own instant: with ``lin``, those
+    at the share s of the flight piece from ``ua`` to ``ub``; with ``kicked``, xs's after splitting's closing kick
+    (a state at the step's end whose velocities are still those of the middle). The state read is left in ``xv``."""
+    for i in range(N):
+        xv[i] = xs[i]
+    if lin:
+        for k in range(N_POS):
+            v = VEL[k]
+            xv[v] = ub[v] if s == 1.0 else ua[v] + s * (ub[v] - ua[v])
+    if kicked:
+        model(F_DRIFT, mode, xs, t, p, fv)
+        for k in range(N_POS):
+            xv[VEL[k]] = xs[VEL[k]] + 0.5 * dt * fv[VEL[k]]
+    return model(F_GUARD, j, xv, t, p, xv)
+
+
+@nb.njit(cache=CACHE)
+def locate_view(j, mode, xa, va, xb, ua, ub, t0, tau, dt, p, flight, lin, kicked, g0, g1, xs, xv, fv):
+    # locate()'s Illinois regula falsi for a guard of the velocities read by view_guard on the interpolant
+    if g0 == 0.0:
+        interpolate(xa, va, xb, 0.0, tau, flight, xs)
+        return 0.0
+    a, b = 0.0, 1.0
+    fa, fb = g0, g1
+    side = 0
+    s = 1.0
+    fs = g1
+    for _ in range(100):
+        s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
+        if not (s > a and s < b):
+            s = 0.5 * (a + b)
+        interpolate(xa, va, xb, s, tau, flight, xs)
+        fs = view_guard(j, mode, xs, ua, ub, s, t0 + s * tau, dt, p, lin, kicked, xv, fv)
+        if fs == 0.0 or (b - a) < 1e-13:
+            break
+        if (fs < 0.0) == (fa < 0.0):
+            a, fa = s, fs
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = s, fs
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    if (fs < 0.0) != (g0 < 0.0) and fs != 0.0:
+        s = a
+        interpolate(xa, va, xb, s, tau, flight, xs)
+    return s
 
 
 @nb.njit(cache=CACHE)
 def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, fw, ws, elog, n_ev):
     """One sub-step of ``x`` that moves the velocities only, at the instant ``t``; returns (mode, events so far).
 
-    kind: KICK (half the drift) or NOISE (G dw) for splitting; MILSTEIN (the velocities' whole Milstein step) for
-    symplectic; FORCE_KICK (half the force) or OU (the exact Ornstein-Uhlenbeck step) for BAOAB. Only a guard of the
-    velocities can cross in it: its crossings are located on the straight line in the velocities from the state
-    before to the state after, the earliest on the line first, and fired as in the flights; the rest of the sub-step
-    then runs from the reset state in its mode, scaled by the share of the line left. Past MAX_EVENTS the sub-step
-    runs without locating.
+    kind: NOISE (G dw, at the step's end) for splitting, OU (the exact Ornstein-Uhlenbeck step, at the half step)
+    for BAOAB. Only a guard of the velocities can cross in it: its crossings are located on the straight line in the
+    velocities from the state before to the state after (for splitting's noise, on the states the closing kick makes
+    of that line: their velocities are the step end's), the earliest on the line first, and fired as in the flights;
+    the rest of the sub-step then runs from the reset state in its mode, scaled by the share of the line left. Past
+    MAX_EVENTS the sub-step runs without locating.
     """
     xa = ws[0:N]
     xb = ws[2 * N:3 * N]
@@ -1320,8 +1460,10 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
     xr = ws[4 * N:5 * N]
     f = ws[5 * N:6 * N]
     G = ws[6 * N:6 * N + N * M]
-    L = ws[6 * N + N * M:WORK]
+    xv = ws[WORK - 2 * N:WORK - N]
+    fv = ws[WORK - N:WORK]
     straight = np.bool_(False)  # locate's flight flag: the straight line (np.bool_: not a literal, no 2nd compile)
+    kicked = np.bool_(SCHEME == 2)
     frac = 1.0  # share of the sub-step still to run
     while True:
         for i in range(N):
@@ -1330,23 +1472,12 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
         # the whole sub-step from xa, in the same operations as where no guard depends on a velocity (the scheme
         # outside: numba compiles only the scheme's own sub-steps, and their callees)
         if SCHEME == 2:
-            if kind == KICK:
-                model(F_DRIFT, mode, xa, t, p, f)
-                for k in range(N_POS):
-                    xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
-            else:
-                model(F_NOISE, mode, xa, t, p, G)
-                for i in range(N):
-                    acc = 0.0
-                    for k in range(M):
-                        acc += G[i * M + k] * dw[k]
-                    xb[i] += acc
-        elif SCHEME == 3:
-''' + textwrap.indent(_MILSTEIN_VELOCITIES.format(state="xa", store="xb[i] += acc"), " " * 12) + '''
-        elif kind == FORCE_KICK:
-            model(F_BFORCE, mode, xa, t, p, f)
-            for k in range(N_POS):
-                xb[VEL[k]] += 0.5 * dt * f[VEL[k]]
+            model(F_NOISE, mode, xa, t, p, G)
+            for i in range(N):
+                acc = 0.0
+                for k in range(M):
+                    acc += G[i * M + k] * dw[k]
+                xb[i] += acc
         else:
 ''' + textwrap.indent(_O_STEP.format(state="xa", store="xb[i] = a * xa[i] + c * acc"), " " * 12) + '''
         if frac < 1.0:  # after a firing: the share of the line left
@@ -1360,10 +1491,11 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
             j = FIRST[mode] + jj
             if VGUARD[j] == 0:  # a guard of the positions and time only: not moved by this sub-step
                 continue
-            g0 = model(F_GUARD, j, xa, t, p, xa)
-            g1 = model(F_GUARD, j, xb, t, p, xb)
+            g0 = view_guard(j, mode, xa, xa, xa, 0.0, t, dt, p, straight, kicked, xv, fv)
+            g1 = view_guard(j, mode, xb, xb, xb, 1.0, t, dt, p, straight, kicked, xv, fv)
             if crosses(DIRECTION[j], g0, g1):
-                sj = locate(j, xa, xa, xb, t, 0.0, p, straight, g0, g1, xs)
+                sj = locate_view(j, mode, xa, xa, xb, xa, xa, t, 0.0, dt, p, straight, straight, kicked, g0, g1, xs,
+                                 xv, fv)
                 if sj < best_s:
                     best_s = sj
                     best = j

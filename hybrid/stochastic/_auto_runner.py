@@ -481,8 +481,10 @@ def simulate_automaton(automaton, scheme: str = "em", *, dt: float, paths: int, 
         Ornstein-Uhlenbeck step, half flight, kick: weak order 2, for velocity drifts F(q, t) - c(q, t) v and
         noise free of the velocities). The last three need every state to be a position (d q/dt = v, no noise)
         or a velocity; they do not pump energy into lightly damped oscillators as the explicit em and milstein
-        do (about dt omega**2 / c). A guard that depends on a velocity (an energy level) is also located in the
-        sub-steps that move only the velocities (kicks, noise, O step), at their instant. ``naive`` (for charts
+        do (about dt omega**2 / c). A guard that depends on a velocity (an energy level) is read and located on
+        states whose positions and velocities belong to one instant (the flight with its velocities moved from the
+        step start's to the step end's, the O step, the noise with the closing kick applied), not on the
+        half-kicked sub-step states. ``naive`` (for charts
         only) is symplectic Euler-Maruyama whose crossing resets the state where the flight meets the guard and drops
         the rest of the step (the event time is wrong by up to a step); it also needs positions and velocities.
     dt, paths, t_end, t_burn : float, int, float, float
