@@ -4,12 +4,11 @@ The probability P that an importance function phi (an observable such as the ene
 before t_max, from x0, is the product of the conditional probabilities p_k of reaching level L_k from the states where
 the paths first reached L_{k-1}. Stage k starts ``clones`` paths from the entrance states of stage k - 1, each
 entrance as often as any other up to one (the first stage from x0), and follows each until phi crosses L_k upward,
-located inside the step
-like an impact (a transition with an identity reset, guard phi - L_k), or t_max passes. The entrance state of the
-next stage is the path's state at the end of the step in which it crossed (a stopping time of the discrete path, so
-the product stays exact for the simulated process). The product of the stage shares is an unbiased estimator of P;
-independent replicas give its confidence interval. Checked against the exact answer of a simulated chain at 1e-3,
-1e-6 and 1e-9, with the interval's coverage over seeds (docs/results/rare-events.md).
+located inside the step like an impact (a transition with an identity reset, guard phi - L_k), or t_max passes.
+The entrance state of the next stage is the path's state at the end of the step in which it crossed (a stopping
+time of the discrete path, so the product stays exact for the simulated process). The product of the stage shares
+is an unbiased estimator of P; independent replicas give its confidence interval. Checked against the exact answer
+of a simulated chain at 1e-3, 1e-6 and 1e-9, with the interval's coverage over seeds (docs/results/rare-events.md).
 
 The paths are driven step by step through the kernel's event step (``drive``), with Gaussian increments drawn from
 one numpy generator per replica (seeded from the root seed): the same seed gives the same numbers.
