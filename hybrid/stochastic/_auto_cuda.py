@@ -675,7 +675,7 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
         raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
     lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
     src, _ = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
-                                  cache=False)
+                                  cache=False, max_registers=max_registers_from_env(precision))
     name = f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}"
     module, _ = _kernel_modules.load_source(name, src)
     from numba.cuda import dispatcher
