@@ -162,18 +162,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale,
         _za = _fty(0.0)
         _zb = _fty(0.0)
         for step in range(n0, n1):  # body indented as the CPU lane loop, for its pieces
-                rec = step >= n_burn
-                t = t0 + _fty(step) * dt
-                _t1 = t0 + _fty(step + 1) * dt
-                phase_now = False
-                sample = False
-                if rec:
-                    phase_now = n_phase > 0 and (step + 1) % phase_steps == 0
-                    _cs += 1
-                    if _cs >= stride:
-                        _cs = 0
-                        sample = True
-{normals}
+''' + _auto_codegen.step_head(16, "_cs", "_fty(step)", "_fty(step + 1)") + '''{normals}
 {fast}
                 if _slow:  # a guard may have fired: the step again through the general event loop
 {to_array}
@@ -204,14 +193,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale,
                 if not sample:
                     continue
                 counts[0] += 1
-                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard
-{to_array}
-                    if outside(mode, x, _t1, p):
-                        counts[2] += 1
-{binning}
-                if jx >= 0:
-{to_ob}
-                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
+''' + _auto_codegen.SAMPLE_CHECKS + '''                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
                     by = (ob[jy] - j_lo[1]) * j_scale[1]
                     if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
                         count(sh, gh, J_OFF + int(by) * NX + int(bx))
