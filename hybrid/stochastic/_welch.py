@@ -153,15 +153,41 @@ def segment_sums(obs: np.ndarray, segment: int, observable: str = "the observabl
 
 
 def _cuda_chunks(model, observable: str, scheme: str, dt: float, t_end: float, t_burn: float, paths: int,
-                 every: int, segment: int, chunk_paths: int, seed: int, x0, *, precision: str = "f64",
-                 threads_per_block: int = 128, launch_steps=None, batch_paths=None) -> tuple[list[dict], dict]:
-    """The chunks' sums of :func:`welch_chunk_sums` on the GPU, and the device's settings.
+                 every: int, segment: int, chunk_paths: int, seed: int, x0, **device) -> tuple[list[dict], dict]:
+    """The chunks' sums of :func:`welch_chunk_sums` on the GPU (:func:`cuda_recordings`), and the device's
+    settings: each batch of recorded paths is cut, chunk by chunk (paths k * chunk_paths ...), into the same
+    segments as on the CPU."""
+    value = _observable_function(model, observable)
+    parts, info = [], {}
+    for _, states in cuda_recordings(model, scheme, dt, t_end, t_burn, paths, every, chunk_paths, seed, x0,
+                                     info=info, **device):
+        xs, ys = states[:, :, 0], states[:, :, 1]
+        obs = np.broadcast_to(np.asarray(value(xs, ys), dtype=float), xs.shape)
+        for c in range(0, states.shape[0], chunk_paths):
+            parts.append(segment_sums(obs[c:c + chunk_paths], segment, observable))
+    return parts, info
+
+
+def cuda_recordings(model, scheme: str, dt: float, t_end: float, t_burn: float, paths: int, every: int,
+                    chunk_paths: int, seed: int, x0, *, precision: str = "f64", threads_per_block: int = 128,
+                    launch_steps=None, batch_paths=None, info: dict | None = None):
+    """The recorded states of an oscillator ensemble on the GPU, batch by batch: yields ``(lo, states)``, the
+    states (x, y) (batch, samples, 2) of paths lo, lo + 1, ... at steps n_burn + j * every (j = 0, 1, ...), the
+    columns that :func:`welch_chunk_sums` keeps of ``sample_paths``.
 
     The oscillator's automaton runs on the CUDA scheduler's kernel in its recording variant
-    (:class:`~hybrid.stochastic._auto_cuda.CudaRecorder`): batches of whole chunks of paths go to the device, which
-    stores every ``every``-th state after the burn-in; each batch comes back to the host, which cuts chunk k (paths
-    k * chunk_paths ...) into the same segments as on the CPU. Path i draws the Philox normals of path i (key from
-    ``seed``) in any batch, so neither the batches nor the launch configuration change a number.
+    (:class:`~hybrid.stochastic._auto_cuda.CudaRecorder`); each batch of whole chunks is recorded on the device and
+    copied to the host. Path i draws the Philox normals of path i (key from ``seed``) in any batch, so neither the
+    batches nor the launch configuration change a number. ``info`` receives the device's settings.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> m = ImpactOscillator("x", "c*y", parameters={"c": 1.0, "D": 0.5}, barriers=None)
+    >>> lo, states = next(cuda_recordings(m, "splitting", 0.05, 20.0, 2.0, 8, 2, 4, 3,
+    ...                                   (0.0, 0.0)))                        # doctest: +SKIP
+    >>> states.shape                                                          # doctest: +SKIP
+    (8, 181, 2)
     """
     from hybrid.sizes import MAX_MEMORY, check_size
 
@@ -183,7 +209,7 @@ def _cuda_chunks(model, observable: str, scheme: str, dt: float, t_end: float, t
     auto_scheme = _front.AUTOMATON_SCHEME_OF[sch.name]
     automaton, observables, _, st = _front._generated(model, auto_scheme)
     samples = 1 + settings["n_samp"]
-    row = samples * (len(st.states) * np.dtype(np.float32 if precision == "f32" else float).itemsize + 16)
+    row = samples * (len(st.states) * np.dtype(np.float32 if precision == "f32" else float).itemsize + 24)
     device = _auto_cuda.CudaRecorder(chunks.job, automaton, auto_scheme, observables, "stratonovich",
                                      summed=_front._SUMMED, phases=0, n_trans=len(st.transitions), seed=seed,
                                      precision=precision, threads_per_block=threads_per_block)
@@ -197,27 +223,23 @@ def _cuda_chunks(model, observable: str, scheme: str, dt: float, t_end: float, t
     elif isinstance(batch_paths, bool) or not isinstance(batch_paths, (int, np.integer)) or batch_paths < 1 \
             or batch_paths % chunk_paths:
         raise ParameterError(f"batch_paths={batch_paths!r} must be a positive multiple of chunk_paths={chunk_paths}")
-    value = _observable_function(model, observable)
-    parts, bad, t0 = [], np.zeros(3), time.perf_counter()
-    mod = device.module
+    info = {} if info is None else info
+    info.update({"scheduler": "cuda", "precision": precision, "rng": _auto_cuda.RNG, "threads_per_block": device.tpb,
+                 "batch_paths": int(batch_paths), "cuda_kernel": device.name})
+    bad, t0, fbad = np.zeros(3), time.perf_counter(), device.module.FW_FBAD
     for lo in range(0, paths, batch_paths):
         hi = min(paths, lo + batch_paths)
         first, rec, rows = device.record(lo, hi, launch_steps)
         iw = rows["IWS"]
         failed = np.flatnonzero(iw[:, 5])
         if failed.size and not bad[0]:
-            bad[1] = rows["FWS"][failed[0], mod.FW_FBAD]
+            bad[1] = rows["FWS"][failed[0], fbad]
         bad[0] += iw[:, 5].sum()
         bad[2] += rows["CNT"][:, 1].sum() + iw[:, 1].sum()
-        states = np.concatenate([first[:, None, :], rec], axis=1).astype(float)
-        xs, ys = states[:, :, 0], states[:, :, 1]
-        obs = np.broadcast_to(np.asarray(value(xs, ys), dtype=float), xs.shape)
-        for c in range(lo, hi, chunk_paths):
-            parts.append(segment_sums(obs[c - lo:c - lo + chunk_paths], segment, observable))
-    _runner._refuse_failed_checks(model, bad, "of the recorded paths")
-    return parts, {"scheduler": "cuda", "precision": precision, "rng": _auto_cuda.RNG,
-                   "threads_per_block": device.tpb, "batch_paths": int(batch_paths),
-                   "device_seconds": time.perf_counter() - t0, "cuda_kernel": device.name}
+        _runner._refuse_failed_checks(model, bad, "of the recorded paths")  # before the numbers are used
+        bad[2] = 0  # warned once per batch at most
+        yield lo, np.concatenate([first[:, None, :], rec], axis=1).astype(float)
+    info["device_seconds"] = time.perf_counter() - t0
 
 
 def _merge(parts: list[dict]) -> dict:
