@@ -8,7 +8,8 @@ writes OUTDIR/config_<k>.npz (a small run, :data:`SMALL`, under the launch confi
 OUTDIR/driven.npz (the recorded states of the small run's first paths, and the CPU kernel's ``drive`` fed the
 same Philox normals up to the same steps) and OUTDIR/cli.csv, OUTDIR/cli_rc.txt (``vibro spectrum --method mc
 --scheduler cuda``); with ``oracle``, only OUTDIR/oracle.npz (the free linear oscillator's spectrum on the
-simulated GPU, :data:`ORACLE`: about 10 s of simulator). Sizes are tiny: the simulator runs every thread as Python (about 1e4 path-steps/s).
+simulated GPU, :data:`ORACLE`: about 10 s of simulator). Sizes are tiny: the simulator runs every thread as
+Python (about 1e4 path-steps/s).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from auto_cuda_sim_runs import philox_increments  # noqa: E402
+
 from hybrid.stochastic import _front, drive_automaton  # noqa: E402
 from hybrid.stochastic._welch import cuda_recordings, welch_spectrum  # noqa: E402
 from models import ImpactOscillator  # noqa: E402

@@ -693,8 +693,9 @@ def kernel_resources(settings: dict) -> dict:
             "blocks_per_sm": blocks, "occupancy": occupancy}
 
 
-def kernel_signature(precision: str = "f64") -> tuple:
-    """numba types of the arguments of ``advance``, in the order :meth:`CudaRun.advance` passes them."""
+def kernel_signature(precision: str = "f64", record: bool = False) -> tuple:
+    """numba types of the arguments of ``advance``, in the order :meth:`CudaRun.advance` passes them (``record``:
+    the recording variant's, as :meth:`CudaRecorder._launch` passes them)."""
     from numba import types as t
 
     f = t.float32 if precision == "f32" else t.float64
@@ -705,12 +706,13 @@ def kernel_signature(precision: str = "f64") -> tuple:
 
     return (i, i, i, i, i, t.uint64, t.uint64, f, f, arr(f, 1), arr(f, 1), arr(f, 1), arr(i, 1), i, i, arr(f, 1),
             arr(f, 1), arr(i, 1), f, i, t.boolean, i, i, arr(f, 2), arr(i, 1), arr(i, 2), arr(d, 2), arr(d, 3),
-            arr(i, 2), arr(d, 2), arr(d, 3), arr(i, 1))
+            arr(i, 2), arr(d, 2), arr(d, 3), arr(i, 1)) + ((i, arr(f, 3)) if record else ())
 
 
 def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: int = 42, v_bins: int = 100,
-                phases: int = 0, precision: str = "f64", cc=(9, 0)) -> str:
-    """PTX of the automaton kernel for compute capability ``cc`` (default sm_90, the H100), without a GPU.
+                phases: int = 0, precision: str = "f64", cc=(9, 0), record: bool = False) -> str:
+    """PTX of the automaton kernel (``record``: its recording variant) for compute capability ``cc`` (default
+    sm_90, the H100), without a GPU.
 
     The real numba-cuda pipeline (typing, lowering, NVVM), which the simulator skips. Needs numba-cuda and the NVVM
     and NVRTC libraries (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels or a CUDA toolkit),
@@ -722,7 +724,7 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
         raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
     lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
     src, _ = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
-                                  cache=False, max_registers=max_registers_from_env(precision))
+                                  cache=False, max_registers=max_registers_from_env(precision), record=record)
     name = f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}"
     module, _ = _kernel_modules.load_source(name, src)
     from numba.cuda import dispatcher
@@ -732,7 +734,7 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
     current = dispatcher.get_current_device
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=tuple(cc))
     try:
-        ptx, _ = cuda.compile_ptx(module.advance.py_func, kernel_signature(precision), cc=cc)
+        ptx, _ = cuda.compile_ptx(module.advance.py_func, kernel_signature(precision, record), cc=cc)
     finally:
         dispatcher.get_current_device = current
     return ptx
