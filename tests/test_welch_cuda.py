@@ -23,7 +23,8 @@ import pytest
 
 from hybrid.errors import ParameterError
 from hybrid.stochastic import _auto_cuda, _front
-from hybrid.stochastic._welch import welch_spectrum
+from hybrid.stochastic._welch import _observable_function, welch_spectrum
+from models import DuffingImpact
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
@@ -123,6 +124,16 @@ def test_the_recording_kernel_is_the_ensemble_kernel_plus_its_records():
                                                                           "normal_pair(k0, k1, ip,"))
     undone = re.sub(r"\n +_r = \(step \+ 1 - n_burn\) // stride - 1\n( +REC\[ip, _r, \d\] = _x\d\n)+", "\n", undone)
     assert undone == plain
+
+
+def test_the_energy_observable_of_a_model_with_real_symbols():
+    """``H`` of Example 1 (its energy in the model's own, real, symbols) as a number on both routes (it was left
+    an expression of the parameters, a TypeError)."""
+    m = DuffingImpact()
+    x, y = np.array([0.3, -0.5]), np.array([0.2, 0.1])
+    a, b = m.params["a"], m.params["b"]
+    np.testing.assert_allclose(_observable_function(m, "H")(x, y), y**2 / 2 + a * x**2 / 2 + b * x**4 / 4,
+                               rtol=1e-14)
 
 
 def test_gpu_settings_are_refused_elsewhere_and_checked():

@@ -95,7 +95,8 @@ def _observable_function(model, observable: str):
     if unknown:
         raise ParameterError(f"observable {observable!r} uses {unknown}: give an expression in x, y and the model's "
                              f"parameters {sorted(model.params)}, or H")
-    expr = expr.xreplace({sp.Symbol(k): v for k, v in model.params.items()})
+    # by name: the model's own symbols (energy_expr) may carry assumptions that a plain Symbol does not match
+    expr = expr.xreplace({s: model.params[str(s)] for s in expr.free_symbols if str(s) in model.params})
     expr = expr.xreplace({s: names[str(s)] for s in expr.free_symbols if str(s) in ("x", "y")})
     return lambdify_numeric((x, y), expr)
 
@@ -210,14 +211,19 @@ def cuda_recordings(model, scheme: str, dt: float, t_end: float, t_burn: float, 
     automaton, observables, _, st = _front._generated(model, auto_scheme)
     samples = 1 + settings["n_samp"]
     row = samples * (len(st.states) * np.dtype(np.float32 if precision == "f32" else float).itemsize + 24)
+
+    def check(limit):
+        check_size(f"the GPU recording of a chunk of {chunk_paths} paths", memory=float(chunk_paths) * row,
+                   max_memory=limit, detail=f"{samples} samples x {row // samples} bytes per path on the device "
+                   "and the host", fix="shorten t_end, raise every, or lower chunk_paths")
+
+    check(MAX_MEMORY)  # the host's limit, before any device is asked for
     device = _auto_cuda.CudaRecorder(chunks.job, automaton, auto_scheme, observables, "stratonovich",
                                      summed=_front._SUMMED, phases=0, n_trans=len(st.transitions), seed=seed,
                                      precision=precision, threads_per_block=threads_per_block)
     limit = 4e9 if _auto_cuda.simulator_enabled() else 0.8 * device.cuda.current_context().get_memory_info()[0]
     limit = min(limit, MAX_MEMORY)
-    check_size(f"the GPU recording of a chunk of {chunk_paths} paths", memory=float(chunk_paths) * row,
-               max_memory=limit, detail=f"{samples} samples x {row // samples} bytes per path on the device and the "
-               "host", fix="shorten t_end, raise every, or lower chunk_paths")
+    check(limit)
     if batch_paths is None:
         batch_paths = chunk_paths * max(1, int(limit // 2 // (chunk_paths * row)))
     elif isinstance(batch_paths, bool) or not isinstance(batch_paths, (int, np.integer)) or batch_paths < 1 \
