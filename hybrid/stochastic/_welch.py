@@ -13,6 +13,10 @@ After the merge every segment is centred on the grand mean (exact, from the sums
 abs(X(omega_k))**2 dt_s / (pi n U) (U the window's mean square) are averaged. The chunks are independent (their
 seeds come from one SeedSequence), so the spread of their spectra gives a batch-means 95 % interval at every
 frequency. The resolution is 2 pi / (segment dt_s) and the band ends at pi / dt_s.
+
+On the GPU (``scheduler="cuda"``, :func:`cuda_recordings`) the CUDA scheduler's kernel, in a recording variant,
+stores the samples of a batch of whole chunks; the host computes the same chunk sums (:func:`segment_sums`) on
+them. Its streams are Philox per path, not the CPU's xoshiro per chunk: the chunks are independent all the same.
 """
 
 from __future__ import annotations
