@@ -4,8 +4,9 @@ Results in docs/results/first-passage-spectra.md.
 
 Example 1 (Duffing a = 1, b = 0.2, c = 0.025, D = 0.05, walls at +-1, Ma V_C = 0.4) from rest. The levels
 H_c = 0.25 ... 2.0 are a chain of modes (mode k goes to k + 1 when H crosses level k, identity reset; every mode keeps
-the walls), so one ensemble gives every level's first-passage time; the velocity sub-steps of baoab locate the level
-crossings inside the step (issue 24). Prints per level and step: mean, 95 % CI, censored paths, R(t) at a few times.
+the walls), so one ensemble gives every level's first-passage time; baoab locates the level crossings inside the
+step, on states whose positions and velocities belong to one instant (issue 26's fix of the velocity guards).
+Prints per level and step: mean, 95 % CI, censored paths, R(t) at a few times.
 
     python benchmarks/first_passage_mc.py [paths] [dt ...]
 """

@@ -4,7 +4,8 @@
 Milstein velocity step, the Ornstein-Uhlenbeck step) at a fixed position. An energy level H - H_c crossed there
 used to be missed: on Example 1's oscillator with levels as a chain of modes, the mean first passage to H = 0.25
 came out 16.5 with baoab (em 5.3, converged Monte Carlo 5.17), and 34 of 64 paths hit a wall (H >= 0.55) before
-their H = 0.5 level had fired.
+their H = 0.5 level had fired. Such guards are now read on states whose positions and velocities belong to one
+instant (along the flight, and at the step's end; tests/test_first_passage_velocity_guards.py has the oracles).
 
 The oracles: the converged mean first-passage time, and an invariant that needs no reference (from rest, no path
 can reach a wall before it crosses H = 0.5, so the walls of the modes below that level never fire).

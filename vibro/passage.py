@@ -340,8 +340,9 @@ def spectrum_mc(model, observable: str = "x", *, dt: float = 0.01, t_end: float 
     :class:`Spectrum` with the 95 % batch-means half-width per frequency in ``details['ci']``.
 
     The variance is the samples' own, so ``variance_check`` tests the normalisation; the frequency resolution
-    2 pi / (segment every dt) and the band edge pi / (every dt) are in ``details``. ``scheduler`` (None/"threads"
-    with ``workers`` threads, "dask", "dask=ADDRESS" or a ``distributed.Client``) never changes a number.
+    2 pi / (segment every dt) and the band edge pi / (every dt) are in ``details``. The CPU schedulers (None or
+    "threads" with ``workers`` threads, "dask", "dask=ADDRESS" or a ``distributed.Client``) never change a number;
+    "cuda" draws its own counter-based streams, so it agrees with them within the intervals, not bitwise.
     """
     from hybrid.stochastic._welch import welch_spectrum
 

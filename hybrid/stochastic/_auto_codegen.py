@@ -736,6 +736,44 @@ F_DRIFT, F_NOISE, F_LGN, F_GUARD, F_RESET, F_GRATE, F_CHECK, F_BFORCE, F_ODAMP =
 
 '''
 # the event code: crossings, their location and event_step (the CUDA target compiles it for the device too)
+def _illinois_body(step: str, flight: str, guard: str, at_zero: str = "", end: str = "") -> str:
+    """The body of a root finder of a guard on the step's interpolant (``interpolate`` over ``step`` with
+    ``flight``), bracketed on [0, 1]: the Illinois (modified regula falsi) method, to 1e-13 of the step in at most 100
+    iterations, the state at the root left in ``xs`` and never beyond the guard. ``guard`` reads the guard at the
+    share s; ``locate`` and ``locate_view`` differ only there. ``at_zero`` and ``end`` are comment lines."""
+    return f'''    if g0 == 0.0:{at_zero}
+        interpolate(xa, va, xb, 0.0, {step}, {flight}, xs)
+        return 0.0
+    a, b = 0.0, 1.0
+    fa, fb = g0, g1
+    side = 0
+    s = 1.0
+    fs = g1
+    for _ in range(100):
+        s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
+        if not (s > a and s < b):
+            s = 0.5 * (a + b)
+        interpolate(xa, va, xb, s, {step}, {flight}, xs)
+        fs = {guard}
+        if fs == 0.0 or (b - a) < 1e-13:
+            break
+        if (fs < 0.0) == (fa < 0.0):
+            a, fa = s, fs
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = s, fs
+            if side == 1:
+                fa *= 0.5
+            side = 1
+{end}    if (fs < 0.0) != (g0 < 0.0) and fs != 0.0:
+        s = a
+        interpolate(xa, va, xb, s, {step}, {flight}, xs)
+    return s
+'''
+
+
 _TEMPLATE_EVENTS = '''\
 @nb.njit(cache=CACHE)
 def crosses(d, g0, g1):
@@ -765,38 +803,10 @@ def interpolate(xa, va, xb, s, dt, free_flight, xs):
 @nb.njit(cache=CACHE)
 def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
     # Illinois regula falsi for the guard on the interpolant, bracketed on [0, 1]; returns s
-    if g0 == 0.0:  # already on the guard (just reset there) and carried beyond: fires at once
-        interpolate(xa, va, xb, 0.0, dt, free_flight, xs)
-        return 0.0
-    a, b = 0.0, 1.0
-    fa, fb = g0, g1
-    side = 0
-    s = 1.0
-    fs = g1
-    for _ in range(100):
-        s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
-        if not (s > a and s < b):
-            s = 0.5 * (a + b)
-        interpolate(xa, va, xb, s, dt, free_flight, xs)
-        fs = model(F_GUARD, j, xs, t0 + s * dt, p, xs)
-        if fs == 0.0 or (b - a) < 1e-13:
-            break
-        if (fs < 0.0) == (fa < 0.0):
-            a, fa = s, fs
-            if side == -1:
-                fb *= 0.5
-            side = -1
-        else:
-            b, fb = s, fs
-            if side == 1:
-                fa *= 0.5
-            side = 1
-    # the state at s must not be beyond the guard: take the bracket end on the side it came from
-    if (fs < 0.0) != (g0 < 0.0) and fs != 0.0:
-        s = a
-        interpolate(xa, va, xb, s, dt, free_flight, xs)
-    return s
-
+''' + _illinois_body("dt", "free_flight", "model(F_GUARD, j, xs, t0 + s * dt, p, xs)",
+                  at_zero="  # already on the guard (just reset there) and carried beyond: fires at once",
+                  end="    # the state at s must not be beyond the guard: take the bracket end on the side it came "
+                      "from\n") + '''
 
 @nb.njit(nogil=True, cache=CACHE)
 def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws, elog):
@@ -896,6 +906,49 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
 
 
 '''
+# pieces the kernel templates share (the CPU chunk and record loops, and the CUDA kernel's step loop)
+_LANE_GROUP = """\
+    for _g in range(0, npaths, LANES):
+        nl = min(LANES, npaths - _g)
+        for _l in range(nl):
+{init}
+            ML[_l] = mode0
+"""
+"""The start of a group of LANES paths: each lane's initial state and mode."""
+
+
+SAMPLE_CHECKS = """\
+                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard
+{to_array}
+                    if outside(mode, x, _t1, p):
+                        counts[2] += 1
+{binning}
+                if jx >= 0:
+{to_ob}
+"""
+"""At a sample: the admissible set where the fast step did not settle it, the observables' histograms and sums, and
+the start of the joint histogram (the observables of its two axes in ``ob``)."""
+
+
+def step_head(indent: int, counter: str, step: str, next_step: str) -> str:
+    """The head of one step of the step loop: whether it is recorded, its start and end times, whether it closes a
+    phase section or a sample (``counter`` counts the recorded steps since the last sample). ``step`` and
+    ``next_step`` are the step and step + 1 as the loop's time arithmetic wants them (the CUDA kernel casts them to
+    its float type)."""
+    lines = ["rec = step >= n_burn",
+             f"t = t0 + {step} * dt",
+             f"_t1 = t0 + {next_step} * dt",
+             "phase_now = False",
+             "sample = False",
+             "if rec:",
+             "    phase_now = n_phase > 0 and (step + 1) % phase_steps == 0",
+             f"    {counter} += 1",
+             f"    if {counter} >= stride:",
+             f"        {counter} = 0",
+             "        sample = True"]
+    return "".join(" " * indent + line + "\n" for line in lines)
+
+
 _TEMPLATE_DRIVE = '''\
 @nb.njit(cache=CACHE)
 def drive(x0, mode0, dws, dt, t0, p, out, elog, nlog, bad):
@@ -960,12 +1013,7 @@ def record_chunk(state, npaths, n_steps, every, dt, t0, x0, mode0, p, zx, zk, zf
     sample = np.bool_(False)
 {alloc}
 {unpack_step}
-    for _g in range(0, npaths, LANES):
-        nl = min(LANES, npaths - _g)
-        for _l in range(nl):
-{init}
-            ML[_l] = mode0
-            for i in range(N):
+''' + _LANE_GROUP + '''            for i in range(N):
                 out[_g + _l, 0, i] = x0[i]
         for step in range(n_steps):
             t = t0 + step * dt
@@ -1064,25 +1112,9 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     _nsamp = 0
 {alloc}
 {unpack}
-    for _g in range(0, npaths, LANES):
-        nl = min(LANES, npaths - _g)
-        for _l in range(nl):
-{init}
-            ML[_l] = mode0
-        cs = 0
+''' + _LANE_GROUP + '''        cs = 0
         for step in range(n_burn + n_samp * stride):
-            rec = step >= n_burn
-            t = t0 + step * dt
-            _t1 = t0 + (step + 1) * dt
-            phase_now = False
-            sample = False
-            if rec:
-                phase_now = n_phase > 0 and (step + 1) % phase_steps == 0
-                cs += 1
-                if cs >= stride:
-                    cs = 0
-                    sample = True
-{lane_step}
+''' + step_head(12, "cs", "step", "(step + 1)") + '''{lane_step}
             # statistics in loops of their own: the stepping loop above, and the time average's loop, stay short
 {phase_block}
             if not sample:
@@ -1091,14 +1123,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
 {load}
 {observe}
                 _nsamp += 1
-                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard
-{to_array}
-                    if outside(mode, x, _t1, p):
-                        counts[2] += 1
-{binning}
-                if jx >= 0:
-{to_ob}
-                    JL[_l, 0] = ob[jx]
+''' + SAMPLE_CHECKS + '''                    JL[_l, 0] = ob[jx]
                     JL[_l, 1] = ob[jy]
             if jx >= 0:  # the joint histogram in a loop of its own, like the stepping and the sums
                 for _l in range(nl):
@@ -1156,6 +1181,13 @@ _LANE_STEP = '''\
                     counts[2] += 1'''
 """One step of the ``nl`` lanes of a group (the generated fast step, then ``event_step`` for the lanes whose guard
 may have fired), shared by ``run_chunk`` and ``record_chunk``: a recorded path is a path of the ensemble."""
+
+
+def noise_increment(indent: int, state: str, into: str, t: str) -> str:
+    """Source lines adding the noise's increment G(``state``, ``t``) dW to every component of ``into``."""
+    lines = [f"model(F_NOISE, mode, {state}, {t}, p, G)", "for i in range(N):", "    acc = 0.0",
+             "    for k in range(M):", "        acc += G[i * M + k] * dw[k]", f"    {into}[i] += acc"]
+    return "".join(" " * indent + line + "\n" for line in lines)
 
 
 # event_step's pieces: the sub-steps that move the velocities only (the opening kick or Milstein step, BAOAB's O step,
@@ -1268,13 +1300,7 @@ _PLAIN_O_STEP = _O_STEP.format(state="x", store="x[i] = a * x[i] + c * acc")
 _PLAIN_CLOSING = """\
 if SCHEME == 2:
     # the time from the step count, not the sum of the event-split pieces: forcing phases stay exact
-    model(F_NOISE, mode, x, t_end, p, G)
-    for i in range(N):
-        acc = 0.0
-        for k in range(M):
-            acc += G[i * M + k] * dw[k]
-        x[i] += acc
-    model(F_DRIFT, mode, x, t_end, p, f)
+""" + noise_increment(4, "x", "x", "t_end") + """    model(F_DRIFT, mode, x, t_end, p, f)
     for k in range(N_POS):
         x[VEL[k]] += 0.5 * dt * f[VEL[k]]
 elif SCHEME == 4:
@@ -1300,14 +1326,7 @@ _LOCATED_O_STEP = _velocity_leg_call("OU", "t")
 
 # splitting's noise is located on the states the closing kick makes of the line (velocity_leg); the closing kick
 # then moves no guard of the velocities on those states
-_LOCATED_CLOSING = _PLAIN_CLOSING.replace("""\
-    model(F_NOISE, mode, x, t_end, p, G)
-    for i in range(N):
-        acc = 0.0
-        for k in range(M):
-            acc += G[i * M + k] * dw[k]
-        x[i] += acc
-""", f"""\
+_LOCATED_CLOSING = _PLAIN_CLOSING.replace(noise_increment(4, "x", "x", "t_end"), f"""\
     {_velocity_leg_call("NOISE", "t_end")}
 """)
 
@@ -1411,37 +1430,8 @@ def view_guard(j, mode, xs, ua, ub, s, t, dt, p, lin, kicked, xv, fv):
 @nb.njit(cache=CACHE)
 def locate_view(j, mode, xa, va, xb, ua, ub, t0, tau, dt, p, flight, lin, kicked, g0, g1, xs, xv, fv):
     # locate()'s Illinois regula falsi for a guard of the velocities read by view_guard on the interpolant
-    if g0 == 0.0:
-        interpolate(xa, va, xb, 0.0, tau, flight, xs)
-        return 0.0
-    a, b = 0.0, 1.0
-    fa, fb = g0, g1
-    side = 0
-    s = 1.0
-    fs = g1
-    for _ in range(100):
-        s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
-        if not (s > a and s < b):
-            s = 0.5 * (a + b)
-        interpolate(xa, va, xb, s, tau, flight, xs)
-        fs = view_guard(j, mode, xs, ua, ub, s, t0 + s * tau, dt, p, lin, kicked, xv, fv)
-        if fs == 0.0 or (b - a) < 1e-13:
-            break
-        if (fs < 0.0) == (fa < 0.0):
-            a, fa = s, fs
-            if side == -1:
-                fb *= 0.5
-            side = -1
-        else:
-            b, fb = s, fs
-            if side == 1:
-                fa *= 0.5
-            side = 1
-    if (fs < 0.0) != (g0 < 0.0) and fs != 0.0:
-        s = a
-        interpolate(xa, va, xb, s, tau, flight, xs)
-    return s
-
+''' + _illinois_body("tau", "flight",
+                     "view_guard(j, mode, xs, ua, ub, s, t0 + s * tau, dt, p, lin, kicked, xv, fv)") + '''
 
 @nb.njit(cache=CACHE)
 def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, fw, ws, elog, n_ev):
@@ -1472,13 +1462,7 @@ def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, f
         # the whole sub-step from xa, in the same operations as where no guard depends on a velocity (the scheme
         # outside: numba compiles only the scheme's own sub-steps, and their callees)
         if SCHEME == 2:
-            model(F_NOISE, mode, xa, t, p, G)
-            for i in range(N):
-                acc = 0.0
-                for k in range(M):
-                    acc += G[i * M + k] * dw[k]
-                xb[i] += acc
-        else:
+''' + noise_increment(12, "xa", "xb", "t") + '''        else:
 ''' + textwrap.indent(_O_STEP.format(state="xa", store="xb[i] = a * xa[i] + c * acc"), " " * 12) + '''
         if frac < 1.0:  # after a firing: the share of the line left
             for i in range(N):

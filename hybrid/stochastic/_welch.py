@@ -13,11 +13,16 @@ After the merge every segment is centred on the grand mean (exact, from the sums
 abs(X(omega_k))**2 dt_s / (pi n U) (U the window's mean square) are averaged. The chunks are independent (their
 seeds come from one SeedSequence), so the spread of their spectra gives a batch-means 95 % interval at every
 frequency. The resolution is 2 pi / (segment dt_s) and the band ends at pi / dt_s.
+
+On the GPU (``scheduler="cuda"``, :func:`cuda_recordings`) the CUDA scheduler's kernel, in a recording variant,
+stores the samples of a batch of whole chunks; the host computes the same chunk sums (:func:`segment_sums`) on
+them. Its streams are Philox per path, not the CPU's xoshiro per chunk: the chunks are independent all the same.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -94,7 +99,8 @@ def _observable_function(model, observable: str):
     if unknown:
         raise ParameterError(f"observable {observable!r} uses {unknown}: give an expression in x, y and the model's "
                              f"parameters {sorted(model.params)}, or H")
-    expr = expr.xreplace({sp.Symbol(k): v for k, v in model.params.items()})
+    # by name: the model's own symbols (energy_expr) may carry assumptions that a plain Symbol does not match
+    expr = expr.xreplace({s: model.params[str(s)] for s in expr.free_symbols if str(s) in model.params})
     expr = expr.xreplace({s: names[str(s)] for s in expr.free_symbols if str(s) in ("x", "y")})
     return lambdify_numeric((x, y), expr)
 
@@ -123,6 +129,19 @@ def welch_chunk_sums(model, observable: str, scheme: str, dt: float, t_end: floa
     _, xs, ys = sample_paths(model, scheme, dt=dt, t_end=t_end, paths=paths, every=every, seed=seed, x0=x0)
     start = int(round(t_burn / (dt * every)))
     obs = np.broadcast_to(np.asarray(value(xs[:, start:], ys[:, start:]), dtype=float), xs[:, start:].shape)
+    return segment_sums(obs, segment, observable)
+
+
+def segment_sums(obs: np.ndarray, segment: int, observable: str = "the observable") -> dict:
+    """The sums of :func:`welch_chunk_sums` of recorded values ``obs`` (paths, samples): the one computation of the
+    CPU and the GPU routes.
+
+    Examples
+    --------
+    >>> part = segment_sums(np.ones((2, 16)), 8)
+    >>> part["segments"], part["samples"], part["power"].shape
+    (6, 32, (5,))
+    """
     if not np.all(np.isfinite(obs)):
         raise ParameterError(f"observable {observable!r} is not finite on the recorded paths")
     window = _window(segment)
@@ -136,6 +155,101 @@ def welch_chunk_sums(model, observable: str, scheme: str, dt: float, t_end: floa
         segments += obs.shape[0]
     return {"power": power, "linear": linear, "segments": segments, "samples": int(obs.size),
             "sum": float(obs.sum()), "sum_sq": float((obs * obs).sum())}
+
+
+def _cuda_chunks(model, observable: str, scheme: str, dt: float, t_end: float, t_burn: float, paths: int,
+                 every: int, segment: int, chunk_paths: int, seed: int, x0, **device) -> tuple[list[dict], dict]:
+    """The chunks' sums of :func:`welch_chunk_sums` on the GPU (:func:`cuda_recordings`), and the device's
+    settings: each batch of recorded paths is cut, chunk by chunk (paths k * chunk_paths ...), into the same
+    segments as on the CPU."""
+    value = _observable_function(model, observable)
+    parts, info = [], {}
+    for _, states in cuda_recordings(model, scheme, dt, t_end, t_burn, paths, every, chunk_paths, seed, x0,
+                                     info=info, **device):
+        xs, ys = states[:, :, 0], states[:, :, 1]
+        obs = np.broadcast_to(np.asarray(value(xs, ys), dtype=float), xs.shape)
+        for c in range(0, states.shape[0], chunk_paths):
+            parts.append(segment_sums(obs[c:c + chunk_paths], segment, observable))
+    return parts, info
+
+
+def cuda_recordings(model, scheme: str, dt: float, t_end: float, t_burn: float, paths: int, every: int,
+                    chunk_paths: int, seed: int, x0, *, precision: str = "f64", threads_per_block: int = 128,
+                    launch_steps=None, batch_paths=None, info: dict | None = None):
+    """The recorded states of an oscillator ensemble on the GPU, batch by batch: yields ``(lo, states)``, the
+    states (x, y) (batch, samples, 2) of paths lo, lo + 1, ... at steps n_burn + j * every (j = 0, 1, ...), the
+    columns that :func:`welch_chunk_sums` keeps of ``sample_paths``.
+
+    The oscillator's automaton runs on the CUDA scheduler's kernel in its recording variant
+    (:class:`~hybrid.stochastic._auto_cuda.CudaRecorder`); each batch of whole chunks is recorded on the device and
+    copied to the host. Path i draws the Philox normals of path i (key from ``seed``) in any batch, so neither the
+    batches nor the launch configuration change a number. ``info`` receives the device's settings.
+
+    Examples
+    --------
+    >>> from models import ImpactOscillator
+    >>> m = ImpactOscillator("x", "c*y", parameters={"c": 1.0, "D": 0.5}, barriers=None)
+    >>> lo, states = next(cuda_recordings(m, "splitting", 0.05, 20.0, 2.0, 8, 2, 4, 3,
+    ...                                   (0.0, 0.0)))                        # doctest: +SKIP
+    >>> states.shape                                                          # doctest: +SKIP
+    (8, 181, 2)
+    """
+    from hybrid.sizes import MAX_MEMORY, check_size
+
+    from . import _auto_cuda, _front, _runner
+
+    sch = _runner.get_scheme(scheme)
+    x0 = _runner._as_x0(x0)
+    n_total = int(round(t_end / dt))
+    start = int(round(t_burn / (dt * every)))
+    settings = _runner._settings(model, sch, dt, paths, n_total * dt, start * every * dt, seed, 4.0, 8, None, None,
+                                 every, chunk_paths, 8, None, x0)
+    settings["n_burn"] = start * every  # exactly: the samples are the CPU's columns start, start + 1, ...
+    settings["n_samp"] = n_total // every - start
+    _runner._check_noise(model)
+    _front.check_model(model, sch)
+    _runner.check_step(model, dt, scheme=sch)
+    sc = _runner._scales(settings)
+    chunks, _ = _front._job(model, settings, sc["h_scale"], sc["v_scale"], (sc["x_scale"], sc["y_scale"]), sch.name)
+    auto_scheme = _front.AUTOMATON_SCHEME_OF[sch.name]
+    automaton, observables, _, st = _front._generated(model, auto_scheme)
+    samples = 1 + settings["n_samp"]
+    row = samples * (len(st.states) * np.dtype(np.float32 if precision == "f32" else float).itemsize + 24)
+
+    def check(limit):
+        check_size(f"the GPU recording of a chunk of {chunk_paths} paths", memory=float(chunk_paths) * row,
+                   max_memory=limit, detail=f"{samples} samples x {row // samples} bytes per path on the device "
+                   "and the host", fix="shorten t_end, raise every, or lower chunk_paths")
+
+    check(MAX_MEMORY)  # the host's limit, before any device is asked for
+    device = _auto_cuda.CudaRecorder(chunks.job, automaton, auto_scheme, observables, "stratonovich",
+                                     summed=_front._SUMMED, phases=0, n_trans=len(st.transitions), seed=seed,
+                                     precision=precision, threads_per_block=threads_per_block)
+    limit = 4e9 if _auto_cuda.simulator_enabled() else 0.8 * device.cuda.current_context().get_memory_info()[0]
+    limit = min(limit, MAX_MEMORY)
+    check(limit)
+    if batch_paths is None:
+        batch_paths = chunk_paths * max(1, int(limit // 2 // (chunk_paths * row)))
+    elif isinstance(batch_paths, bool) or not isinstance(batch_paths, (int, np.integer)) or batch_paths < 1 \
+            or batch_paths % chunk_paths:
+        raise ParameterError(f"batch_paths={batch_paths!r} must be a positive multiple of chunk_paths={chunk_paths}")
+    info = {} if info is None else info
+    info.update({"scheduler": "cuda", "precision": precision, "rng": _auto_cuda.RNG, "threads_per_block": device.tpb,
+                 "batch_paths": int(batch_paths), "cuda_kernel": device.name})
+    bad, t0, fbad = np.zeros(3), time.perf_counter(), device.module.FW_FBAD
+    for lo in range(0, paths, batch_paths):
+        hi = min(paths, lo + batch_paths)
+        first, rec, rows = device.record(lo, hi, launch_steps)
+        iw = rows["IWS"]
+        failed = np.flatnonzero(iw[:, 5])
+        if failed.size and not bad[0]:
+            bad[1] = rows["FWS"][failed[0], fbad]
+        bad[0] += iw[:, 5].sum()
+        bad[2] += rows["CNT"][:, 1].sum() + iw[:, 1].sum()
+        _runner._refuse_failed_checks(model, bad, "of the recorded paths")  # before the numbers are used
+        bad[2] = 0  # warned once per batch at most
+        yield lo, np.concatenate([first[:, None, :], rec], axis=1).astype(float)
+    info["device_seconds"] = time.perf_counter() - t0
 
 
 def _merge(parts: list[dict]) -> dict:
@@ -181,7 +295,9 @@ def _run_chunks(tasks, scheduler, workers) -> list[dict]:
 
 def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, dt: float, t_end: float,
                    t_burn: float, paths: int, every: int = 10, segment: int = 1024, chunk_paths: int = 8,
-                   seed: int = 1, x0=(0.0, 0.0), scheduler=None, workers: int | None = None) -> WelchSpectrum:
+                   seed: int = 1, x0=(0.0, 0.0), scheduler=None, workers: int | None = None,
+                   precision: str = "f64", threads_per_block: int = 128, launch_steps: int | None = None,
+                   batch_paths: int | None = None) -> WelchSpectrum:
     """The one-sided PSD of ``observable`` (an expression in x and y, or ``H``) by Monte Carlo (Welch).
 
     Parameters
@@ -200,9 +316,16 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
         Record every ``every`` steps; segments of ``segment`` recorded samples (an even number).
     seed : int
         Root seed: chunk k draws from ``SeedSequence(seed).spawn(chunks)[k]``.
-    scheduler : None, "threads", "dask", "dask=ADDRESS" or a ``distributed.Client``
+    scheduler : None, "threads", "dask", "dask=ADDRESS", "cuda" or a ``distributed.Client``
         Where the chunks run; ``workers`` local threads (default ``numba.get_num_threads()``). The chunks' sums
-        are merged in chunk order, so the numbers are the same on any of them.
+        are merged in chunk order, so the numbers are the same on any of the CPU schedulers. ``cuda``: the
+        oscillator's automaton on the GPU (the CUDA scheduler's kernel, recording every sample's state; the host
+        cuts the same segments). Its Philox streams differ from the CPU's xoshiro streams: the same seed gives
+        other paths, and spectra that agree within their intervals, not bitwise.
+    precision, threads_per_block, launch_steps, batch_paths :
+        ``cuda`` only: the kernel's float type, its block size and steps per launch (no number depends on these
+        two), and the paths recorded per batch (a multiple of ``chunk_paths``; default: as many as half the device
+        memory, at most 4 GB, holds; no number depends on it either).
 
     Returns
     -------
@@ -235,15 +358,26 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
     chunks = -(-paths // chunk_paths)
     if chunks < 2:
         raise ParameterError(f"paths={paths} in chunks of {chunk_paths} gives one chunk: the interval needs several")
-    if isinstance(scheduler, str) and not (scheduler in ("threads", "local")
+    gpu = isinstance(scheduler, str) and scheduler == "cuda"
+    if isinstance(scheduler, str) and not (gpu or scheduler in ("threads", "local")
                                            or scheduler.partition("=")[0] == "dask"):
-        raise ParameterError(f"scheduler={scheduler!r}; the Monte Carlo spectrum runs on threads, dask, dask=ADDRESS "
-                             "or a distributed.Client (not yet on the GPU)")
+        raise ParameterError(f"scheduler={scheduler!r}; the Monte Carlo spectrum runs on threads, dask, dask=ADDRESS, "
+                             "cuda or a distributed.Client")
+    if not gpu and (precision != "f64" or batch_paths is not None or launch_steps is not None):
+        raise ParameterError("precision, launch_steps and batch_paths are settings of scheduler='cuda'")
     _observable_function(model, observable)  # refuse a bad observable before any path is run
-    seeds = np.random.SeedSequence(seed).spawn(chunks)
-    tasks = [(model, observable, scheme, dt, t_end, t_burn, min(chunk_paths, paths - k * chunk_paths), every,
-              segment, int(seeds[k].generate_state(1, dtype=np.uint64)[0] % (2**62)), x0) for k in range(chunks)]
-    parts = _run_chunks(tasks, scheduler, workers)
+    device = {}
+    if gpu:
+        parts, device = _cuda_chunks(model, observable, scheme, dt, t_end, t_burn, paths, every, segment,
+                                     chunk_paths, seed, x0, precision=precision,
+                                     threads_per_block=threads_per_block, launch_steps=launch_steps,
+                                     batch_paths=batch_paths)
+    else:
+        seeds = np.random.SeedSequence(seed).spawn(chunks)
+        tasks = [(model, observable, scheme, dt, t_end, t_burn, min(chunk_paths, paths - k * chunk_paths), every,
+                  segment, int(seeds[k].generate_state(1, dtype=np.uint64)[0] % (2**62)), x0)
+                 for k in range(chunks)]
+        parts = _run_chunks(tasks, scheduler, workers)
     total = _merge(parts)
     mean = total["sum"] / total["samples"]
     # centred on the grand mean (exact after the merge), not on each segment's own mean, which would take the
@@ -260,4 +394,5 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
                          settings={"scheme": scheme, "dt": dt, "t_end": t_end, "t_burn": t_burn, "paths": paths,
                                    "every": every, "segment": segment, "chunk_paths": chunk_paths, "seed": seed,
                                    "segments": int(total["segments"]),
-                                   "resolution": 2 * math.pi / (segment * dt_s), "band_edge": math.pi / dt_s})
+                                   "resolution": 2 * math.pi / (segment * dt_s), "band_edge": math.pi / dt_s,
+                                   **device})

@@ -59,8 +59,9 @@ def register(subparsers) -> None:
     p.add_argument("--segment", type=int, default=512,
                    help="mc: samples per Welch segment (resolution 2 pi/(segment every dt))")
     p.add_argument("--seed", type=int, default=1, help="mc: root seed")
-    p.add_argument("--scheduler", default=None, metavar="threads|dask[=ADDRESS]",
-                   help="mc: where the chunks run (the same numbers on any)")
+    p.add_argument("--scheduler", default=None, metavar="threads|dask[=ADDRESS]|cuda",
+                   help="mc: where the chunks run (the same numbers on threads and dask; cuda: the GPU, whose Philox "
+                        "streams give other paths and a spectrum that agrees within the intervals)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="accepted for symmetry with the other commands (nothing to show)")
     p.set_defaults(func=run)
