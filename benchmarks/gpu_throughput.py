@@ -140,7 +140,9 @@ def automata(a) -> dict:
         if not sim:
             res = _auto_cuda.kernel_resources(gpu.settings)
             row.update(res)
-            line += (f"   {res['registers_per_thread']} registers/thread, local {res['local_bytes_per_thread']} B, "
+            row["max_registers"] = gpu.settings.get("max_registers")
+            line += (f"   {res['registers_per_thread']} registers/thread (cap {row['max_registers']}), "
+                     f"local {res['local_bytes_per_thread']} B, "
                      f"shared {res['shared_bytes_per_block']} B/block, occupancy {res['occupancy']:.0%}")
         print(line, flush=True)
         out["models"][name] = row
@@ -207,8 +209,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--cpu-paths", type=int, help="CPU paths (default 1024; --quick 64)")
     ap.add_argument("--cpu-steps", type=int, help="CPU steps per path (default 2e5; --quick 2000)")
     ap.add_argument("--threads-per-block", default="128", help="comma list to sweep, e.g. 128,256")
-    ap.add_argument("--max-registers", default="0",
-                    help="comma list of register caps per thread to sweep (0: none), e.g. 0,96,64")
+    ap.add_argument("--max-registers", default="default",
+                    help="comma list of register caps per thread to sweep (0: none; default: the library's, "
+                         "hybrid.stochastic._auto_cuda.DEFAULT_MAX_REGISTERS), e.g. default,0,128,64")
     ap.add_argument("--no-f32", action="store_true", help="skip the single-precision run")
     ap.add_argument("--json", type=Path, help="write the figures to this file")
     a = ap.parse_args(argv)
@@ -240,17 +243,21 @@ def main(argv=None) -> dict:
     steps = a.steps or (200 if sim else 2000 if a.quick else 100_000)
     out["device"] = describe_device()
     print(f"device: {out['device']}")
-    configs = [(int(t), int(r)) for t in a.threads_per_block.split(",") for r in a.max_registers.split(",")]
+    configs = [(int(t), r.strip()) for t in a.threads_per_block.split(",") for r in a.max_registers.split(",")]
     if sim:
         configs = configs[:1]
 
     def timed(prec, tpb, maxreg):
-        os.environ["VIBRO_CUDA_MAX_REGISTERS"] = str(maxreg)  # read when the kernel is generated
+        if maxreg == "default":  # read when the kernel is generated
+            os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None)
+        else:
+            os.environ["VIBRO_CUDA_MAX_REGISTERS"] = str(int(maxreg))
         warm = run("cuda", min(paths, 4 * tpb), 10, a.scheme, precision=prec, threads_per_block=tpb)
         g = run("cuda", paths, steps, a.scheme, precision=prec, threads_per_block=tpb)
         # the warm-up's generation and load plus its launches (numba-cuda compiles at the first launch)
         compile_s = warm.compile_time + warm.wall_time
-        row = {"precision": prec, "threads_per_block": tpb, "max_registers": maxreg or None, "paths": paths,
+        cap = g.settings.get("max_registers")
+        row = {"precision": prec, "threads_per_block": tpb, "max_registers": cap, "paths": paths,
                "steps": steps, "path_steps_per_s": g.throughput, "wall_s": g.wall_time,
                "compile_s": compile_s, "E_H": [g.mean_energy.value, g.mean_energy.ci],
                "violations": g.violations, "impacts": g.impacts}
@@ -259,7 +266,7 @@ def main(argv=None) -> dict:
             row["resources"] = _auto_cuda.kernel_resources(g.settings)
             regs = (f", {row['resources']['registers_per_thread']} registers/thread, occupancy "
                     f"{row['resources']['occupancy']:.0%}")
-        print(f"GPU kernel  ({prec}, {tpb} threads/block, max registers {maxreg or '-'}): {paths} paths x {steps} "
+        print(f"GPU kernel  ({prec}, {tpb} threads/block, max registers {cap or '-'}): {paths} paths x {steps} "
               f"steps, {g.throughput:.3g} path-steps/s, wall {g.wall_time:.3g} s, compile {compile_s:.3g} s{regs}"
               f"  (E[H] = {g.mean_energy}, violations {g.violations})")
         return g, row
@@ -275,7 +282,7 @@ def main(argv=None) -> dict:
     out["gpu_f64"] = rows
     out["ratio_gpu_f64_to_cpu"] = best[0].throughput / cpu.throughput
     print(f"ratio GPU f64 / CPU: {out['ratio_gpu_f64_to_cpu']:.3g}  (best configuration: {best[1]} threads/block, "
-          f"max registers {best[2] or '-'})")
+          f"max registers {best[2]})")
     if not a.no_f32:
         runs["f32"], out["gpu_f32"] = timed("f32", best[1], best[2])
     if "f32" in runs:

@@ -55,9 +55,13 @@ def _env(**extra):
 def sim(tmp_path_factory):
     """The output folder of one run of tests/auto_cuda_sim_runs.py on the simulator (about 30 s on 2 cores)."""
     out = tmp_path_factory.mktemp("autocudasim")
+    # VIBRO_CUDA_ON_DEVICE=1 runs the same checks on a real GPU (and the CPU references compiled)
+    on_device = os.environ.get("VIBRO_CUDA_ON_DEVICE") == "1"
+    env = _env() if on_device else _env(NUMBA_ENABLE_CUDASIM="1", NUMBA_DISABLE_JIT="1")
     r = subprocess.run([sys.executable, str(ROOT / "tests" / "auto_cuda_sim_runs.py"), str(out)], cwd=ROOT,
-                       env=_env(NUMBA_ENABLE_CUDASIM="1", NUMBA_DISABLE_JIT="1"), capture_output=True, text=True,
-                       timeout=900)
+                       env=env, capture_output=True, text=True, timeout=900)
+    if on_device:
+        print(r.stdout)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
     return out
 

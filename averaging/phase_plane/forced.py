@@ -631,7 +631,7 @@ def periodic_density_xy(model, grid=None, h_max: float = 4.0, *, cells: str = "c
         Also solve on the grid twice coarser (same steps, and again at half the steps) and estimate the L1 error of
         p(H | t) on 100 bins: the cells' part from the two grids and the time steps' part from the two step counts
         (``error_estimate`` = ``grid_estimate`` + ``time_estimate``, order 2 assumed for both: conservative);
-        warn (:class:`GridWarning`) when it exceeds ``l1_tol``. Makes ``steps`` even (at least 8).
+        warn (:class:`GridWarning`) when it exceeds ``l1_tol``. Rounds ``steps`` up to even, and refuses fewer than 8.
     l1_tol : float
         The L1 error of p(H | t) above which ``check`` warns.
     extrapolate : bool

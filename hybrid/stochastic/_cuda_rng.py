@@ -7,9 +7,10 @@ on the block size, the grid or where a launch starts, which is what makes CUDA r
 configurations and across a checkpoint and resume.
 
 Words are held in uint64 variables (values below 2**32) so that the 32 x 32 -> 64 bit products of Philox are plain
-uint64 multiplications, identical under numba-cuda and under its simulator (numpy scalars). The host functions
-here are plain Python (the tests check them against known-answer vectors); :func:`device_normal_pair` compiles the
-very same code for the device.
+uint64 multiplications, identical under numba-cuda and under its simulator (numpy scalars); on a GPU the high
+words come from the 32-bit multiply-high instead (:func:`_make_round_hi32`), the same words in fewer instructions.
+The host functions here are plain Python (the tests check them against known-answer vectors);
+:func:`device_normal_pair` compiles the very same code for the device.
 """
 
 from __future__ import annotations
@@ -139,18 +140,53 @@ def seed_key(seed: int) -> tuple[np.uint64, np.uint64]:
     return np.uint64(words[0]), np.uint64(words[1])
 
 
+def _signed32(word: int) -> np.int32:
+    """The 32-bit word as numba-cuda's int32 (libdevice's ``umulhi`` is typed int32; the bits are what count)."""
+    return np.array(word, dtype=np.uint32).view(np.int32)[()]
+
+
+_M0_I32 = _signed32(0xD2511F53)
+_M1_I32 = _signed32(0xCD9E8D57)
+
+
+def _make_round_hi32(umulhi):
+    """A Philox round whose high product words come from the device's 32 x 32 multiply-high (``umulhi``) instead
+    of a 64-bit product: the same words, fewer instructions. The simulator has no ``umulhi``, so it keeps
+    :func:`_philox_round`; a GPU run checks the two against each other through the host's normals (the tests feed
+    the CPU kernel the host's Philox normals and find the GPU's paths)."""
+    def philox_round_hi32(c0, c1, c2, c3, k0, k1):
+        h0 = np.uint64(umulhi(_M0_I32, np.int32(c0))) & _MASK
+        h1 = np.uint64(umulhi(_M1_I32, np.int32(c2))) & _MASK
+        return h1 ^ c1 ^ k0, (_M1 * c2) & _MASK, h0 ^ c3 ^ k1, (_M0 * c0) & _MASK
+
+    return philox_round_hi32
+
+
+PHILOX_PRODUCTS = ("hi32", "u64")
+"""How the device forms Philox's 32 x 32 -> 64 bit products: ``hi32`` (multiply-high, the default on a GPU) or
+``u64`` (a 64-bit multiplication; the simulator's)."""
+
 _DEVICE: dict = {}
 
 
-def device_normal_pair(precision: str):
-    """The CUDA device function ``normal_pair(k0, k1, path, pair)`` for ``precision`` ('f64' or 'f32').
+def device_normal_pair(precision: str, products: str = "u64"):
+    """The CUDA device function ``normal_pair(k0, k1, path, pair)`` for ``precision`` ('f64' or 'f32'), its Philox
+    products formed as ``products`` says (:data:`PHILOX_PRODUCTS`; the same words either way).
 
     Built on first use, so that importing this module (doctests, CI without numba-cuda) needs no ``numba.cuda``.
     """
-    if precision not in _DEVICE:
+    if products not in PHILOX_PRODUCTS:
+        raise ValueError(f"products={products!r}; choose one of {PHILOX_PRODUCTS}")
+    if (precision, products) not in _DEVICE:
         from numba import cuda
 
-        rnd = cuda.jit(device=True, inline=True)(_philox_round)
+        if products == "hi32":
+            from numba.cuda import libdevice
+
+            rnd = cuda.jit(device=True, inline=True)(_make_round_hi32(libdevice.umulhi))
+        else:
+            rnd = cuda.jit(device=True, inline=True)(_philox_round)
         philox = cuda.jit(device=True, inline=True)(_make_philox(rnd))
-        _DEVICE[precision] = cuda.jit(device=True, inline=True)(_make_normal_pair(philox, precision == "f32"))
-    return _DEVICE[precision]
+        _DEVICE[precision, products] = cuda.jit(device=True, inline=True)(_make_normal_pair(philox,
+                                                                                           precision == "f32"))
+    return _DEVICE[precision, products]
