@@ -137,6 +137,9 @@ def test_examples_write_outside_the_working_directory_and_keep_what_they_print(t
     printed = Path(re.search(r"(/\S+\.png)", line).group(1))
     try:
         assert printed.is_file() and printed.stat().st_size > 10_000
+        if script == "05_reproduce_paper.py":  # its checks of the numbers pass, and the sidecar is beside the figure
+            assert "OK" in proc.stdout, proc.stdout
+            assert (printed.parent / "fig02.png").is_file() and (printed.parent / "fig02.json").is_file()
     finally:
         shutil.rmtree(printed.parent, ignore_errors=True)
 

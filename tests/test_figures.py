@@ -6,10 +6,7 @@ shares them; the example smoke test runs Fig. 2 at the default preset (~5-10 s).
 """
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -245,13 +242,7 @@ def test_cli_reports_reuse(outdir, tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------------------------- example 05
-def test_example_05_reproduce_paper_runs(tmp_path):
-    env = dict(os.environ, MPLBACKEND="Agg")
-    proc = subprocess.run([sys.executable, str(ROOT / "examples" / "05_reproduce_paper.py"), str(tmp_path)],
-                          capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "OK" in proc.stdout
-    assert (tmp_path / "fig02.png").is_file() and (tmp_path / "fig02.json").is_file()
+# example 05 runs (its checks, fig02.png and its sidecar) in test_cli_product.py, from an empty working directory
 
 
 # ----------------------------------------------------------------------------------------------- no pickles

@@ -274,6 +274,10 @@ def _strong_errors(model, scheme, z, ref, T, ks):
     return dts, errs
 
 
+# two kernels of their own: the default suite fits the same orders (em 0.5, and milstein's automaton scheme
+# symplectic 1.0, with multiplicative noise) in test_automaton_front.py's two-degree-of-freedom test, and
+# test_two_entry_points_give_the_same_numbers_for_one_seed checks that milstein runs that kernel, to the bit
+@pytest.mark.slow
 def test_strong_orders_em_half_milstein_one_with_multiplicative_noise():
     model = ImpactOscillator("a*x", "c*y", noise=("1 + s*y",), intensity="D",
                              parameters={"a": 1.0, "c": 0.5, "D": 0.5, "s": 0.5}, barriers=None)
