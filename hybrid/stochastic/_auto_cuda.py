@@ -472,6 +472,17 @@ class CudaRun:
             out[j] = fw[:, gs].sum(), fw[:, gs + 1].sum(), fw[:, gs + 2].min(), fw[:, gs + 3].max()
         return out
 
+    def _launch_steps(self, launch_steps, paths: int) -> int:
+        """``launch_steps`` checked (an integer in [1, :func:`max_launch_steps`]), or the default for ``paths``."""
+        cap = max_launch_steps(self.tpb)
+        if launch_steps is None:
+            return default_launch_steps(paths, self.tpb)
+        if isinstance(launch_steps, bool) or not isinstance(launch_steps, (int, np.integer)) or \
+                not 1 <= launch_steps <= cap:
+            raise ParameterError(f"launch_steps={launch_steps!r} must be an integer in [1, {cap}] (int32 shared "
+                                 f"cells of {self.tpb} threads per block)")
+        return int(launch_steps)
+
     def run(self, rows: dict, *, run_id: str, checkpoint=None, resume=False, checkpoint_every=4,
             launch_steps=None) -> dict:
         """Advance every path over the run's steps and fill the runner's per-chunk ``rows``; the run's settings.
@@ -482,13 +493,7 @@ class CudaRun:
         a = self.job.args
         paths = int(self.job.npaths.sum())
         total = a["n_burn"] + a["n_samp"] * a["stride"]
-        cap = max_launch_steps(self.tpb)
-        if launch_steps is None:
-            launch_steps = default_launch_steps(paths, self.tpb)
-        elif isinstance(launch_steps, bool) or not isinstance(launch_steps, (int, np.integer)) or \
-                not 1 <= launch_steps <= cap:
-            raise ParameterError(f"launch_steps={launch_steps!r} must be an integer in [1, {cap}] (int32 shared "
-                                 f"cells of {self.tpb} threads per block)")
+        launch_steps = self._launch_steps(launch_steps, paths)
         host = self.fresh(paths)
         host["n_done"] = np.zeros(1, np.int64)
         ckdir = Path(checkpoint) if checkpoint is not None else None
@@ -596,13 +601,7 @@ class CudaRecorder(CudaRun):
         a = self.job.args
         paths = int(hi - lo)
         n_burn, total = int(a["n_burn"]), int(a["n_burn"] + a["n_samp"] * a["stride"])
-        cap = max_launch_steps(self.tpb)
-        if launch_steps is None:
-            launch_steps = default_launch_steps(paths, self.tpb)
-        elif isinstance(launch_steps, bool) or not isinstance(launch_steps, (int, np.integer)) or \
-                not 1 <= launch_steps <= cap:
-            raise ParameterError(f"launch_steps={launch_steps!r} must be an integer in [1, {cap}] (int32 shared "
-                                 f"cells of {self.tpb} threads per block)")
+        launch_steps = self._launch_steps(launch_steps, paths)
         dev = {k: self.cuda.to_device(v) for k, v in self.fresh(paths).items()}
         rec = self.cuda.to_device(np.zeros((paths, int(a["n_samp"]), self.n), self.ft))
         start = None
