@@ -1318,7 +1318,15 @@ def _velocity_leg_call(kind: str, when: str) -> str:
 # where a guard depends on a velocity: the opening sub-step is the plain one (no guard is read on its state, whose
 # velocities are those of another instant than its positions: the flight reads it from the velocities at the step's
 # start); n_ev as np.int64, not a literal, so that velocity_leg is compiled once
-_LOCATED_OPENING = _PLAIN_OPENING.replace("n_ev = 0", "n_ev = np.int64(0)")
+def _replace_once(text: str, old: str, new: str) -> str:
+    """``text`` with its one ``old`` replaced: a template that no longer holds it exactly once must fail loudly here,
+    not generate a kernel that silently skips the located sub-step."""
+    if text.count(old) != 1:
+        raise AssertionError(f"the template changed: {old[:60]!r} is there {text.count(old)} times")
+    return text.replace(old, new)
+
+
+_LOCATED_OPENING = _replace_once(_PLAIN_OPENING, "n_ev = 0", "n_ev = np.int64(0)")
 
 
 _LOCATED_O_STEP = _velocity_leg_call("OU", "t")
@@ -1326,7 +1334,7 @@ _LOCATED_O_STEP = _velocity_leg_call("OU", "t")
 
 # splitting's noise is located on the states the closing kick makes of the line (velocity_leg); the closing kick
 # then moves no guard of the velocities on those states
-_LOCATED_CLOSING = _PLAIN_CLOSING.replace(noise_increment(4, "x", "x", "t_end"), f"""\
+_LOCATED_CLOSING = _replace_once(_PLAIN_CLOSING, noise_increment(4, "x", "x", "t_end"), f"""\
     {_velocity_leg_call("NOISE", "t_end")}
 """)
 
@@ -1398,9 +1406,7 @@ _LOCATED_EVENTS = (
 def _located(template: str) -> str:
     """``template`` (the CPU module's or the device's) with the event loop of :data:`_LOCATED_EVENTS`."""
     for old, new in _LOCATED_EVENTS:
-        if template.count(old) != 1:
-            raise AssertionError(f"the event template changed: {old!r}")
-        template = template.replace(old, new)
+        template = _replace_once(template, old, new)
     return template
 
 

@@ -629,7 +629,7 @@ class CudaRecorder(CudaRun):
 DEFAULT_MAX_REGISTERS = {"f64": 96, "f32": 64}
 """The register cap per thread when ``VIBRO_CUDA_MAX_REGISTERS`` is unset. Measured on an H100 (2**20 paths x
 20,000 steps, benchmarks/gpu_throughput.py and docs/gpu.md): Example 1 in f64 ran at 3.3-3.6e10 path-steps/s with
-the compiler's 160 registers and 4.4-4.6e10 capped at 96; the impact pair 2.1e10 with 210 and 2.6e10 at 96; f32
+the compiler's 160 registers and 4.4-4.6e10 capped at 96; the impact pair 2.1e10 with 210 and 2.6-2.7e10 at 96; f32
 Example 1 3.8-4.5e10 with 138 and 4.8-4.9e10 at 64. The spills the caps cause cost less than the occupancy gained."""
 
 
@@ -645,6 +645,8 @@ def max_registers_from_env(precision: str = "f64") -> int | None:
     """
     import os
 
+    if precision not in PRECISIONS:
+        raise ParameterError(f"precision={precision!r}; choose one of {PRECISIONS}")
     raw = os.environ.get("VIBRO_CUDA_MAX_REGISTERS", "").strip()
     if not raw:
         return DEFAULT_MAX_REGISTERS[precision]

@@ -115,9 +115,9 @@ class RareEventEstimate:
     wall_time, cpu_time : float
         Seconds of wall clock and of this process's CPU, compile excluded.
     brute_force_steps : float
-        Steps brute-force Monte Carlo would need for the same relative error: (1 - P) / (P rel_err^2) paths of
-        about t_max / dt steps each (each path runs to t_max unless it succeeds). A step of brute force is cheaper
-        than one of splitting, so compare costs with :meth:`variance_reduction`.
+        Steps brute-force Monte Carlo would need for the same relative standard error: (1 - P) / (P rel_err^2)
+        paths of about t_max / dt steps each (each path runs to t_max unless it succeeds). A step of brute force is
+        cheaper than one of splitting, so compare costs with :meth:`variance_reduction`.
     """
 
     probability: float
@@ -168,11 +168,15 @@ class RareEventEstimate:
         >>> round(est.variance_reduction(1e-4))   # (1e6 * 1e-4) / (0.02 / 2 * 2.0)
         5000
         """
+        c_bf = float(brute_force_cpu_per_path)
+        if not (math.isfinite(c_bf) and c_bf > 0):
+            raise ParameterError(f"brute_force_cpu_per_path={brute_force_cpu_per_path!r} must be a positive number "
+                                 "of CPU seconds")
         p = self.probability
         work = self.replica_relative_variance / len(self.replicas) * self.cpu_time
         if not (p > 0 and work > 0 and math.isfinite(work)):
             return math.nan
-        return (1 - p) / p * float(brute_force_cpu_per_path) / work
+        return (1 - p) / p * c_bf / work
 
     def to_pandas(self):
         """One row per stage: level, mean share, its spread over the replicas."""
@@ -371,7 +375,7 @@ def splitting_probability(automaton, phi, target: float, *, levels, t_max: float
     from scipy import stats
 
     half = float(stats.t.ppf(0.975, len(est) - 1) * est.std(ddof=1) / math.sqrt(len(est)))
-    rel = half / 1.959963984540054 / mean if mean > 0 else math.inf
+    rel = float(est.std(ddof=1) / math.sqrt(len(est)) / mean) if mean > 0 else math.inf  # the estimate's own
     brute = (1 - mean) / (mean * rel * rel) * steps if mean > 0 and rel > 0 else math.inf
     result = RareEventEstimate(mean, half, est, shares, grid, int(cost), float(brute), time.perf_counter() - started,
                                {"scheme": scheme, "dt": dt, "t_max": t_max, "clones": int(clones),

@@ -217,9 +217,10 @@ def cuda_recordings(model, scheme: str, dt: float, t_end: float, t_burn: float, 
     row = samples * (len(st.states) * np.dtype(np.float32 if precision == "f32" else float).itemsize + 24)
 
     def check(limit):
-        check_size(f"the GPU recording of a chunk of {chunk_paths} paths", memory=float(chunk_paths) * row,
-                   max_memory=limit, detail=f"{samples} samples x {row // samples} bytes per path on the device "
-                   "and the host", fix="shorten t_end, raise every, or lower chunk_paths")
+        # twice the recording: the host holds a batch's copy while the next one is recorded and converted
+        check_size(f"the GPU recording of a chunk of {chunk_paths} paths", memory=2.0 * chunk_paths * row,
+                   max_memory=limit, detail=f"{samples} samples x {row // samples} bytes per path, twice (a batch "
+                   "in hand and the next)", fix="shorten t_end, raise every, or lower chunk_paths")
 
     check(MAX_MEMORY)  # the host's limit, before any device is asked for
     device = _auto_cuda.CudaRecorder(chunks.job, automaton, auto_scheme, observables, "stratonovich",
@@ -229,7 +230,7 @@ def cuda_recordings(model, scheme: str, dt: float, t_end: float, t_burn: float, 
     limit = min(limit, MAX_MEMORY)
     check(limit)
     if batch_paths is None:
-        batch_paths = chunk_paths * max(1, int(limit // 2 // (chunk_paths * row)))
+        batch_paths = chunk_paths * max(1, int(limit // 4 // (chunk_paths * row)))
     elif isinstance(batch_paths, bool) or not isinstance(batch_paths, (int, np.integer)) or batch_paths < 1 \
             or batch_paths % chunk_paths:
         raise ParameterError(f"batch_paths={batch_paths!r} must be a positive multiple of chunk_paths={chunk_paths}")
@@ -363,8 +364,10 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
                                            or scheduler.partition("=")[0] == "dask"):
         raise ParameterError(f"scheduler={scheduler!r}; the Monte Carlo spectrum runs on threads, dask, dask=ADDRESS, "
                              "cuda or a distributed.Client")
-    if not gpu and (precision != "f64" or batch_paths is not None or launch_steps is not None):
-        raise ParameterError("precision, launch_steps and batch_paths are settings of scheduler='cuda'")
+    if not gpu and (precision != "f64" or batch_paths is not None or launch_steps is not None
+                    or threads_per_block != 128):
+        raise ParameterError("precision, threads_per_block, launch_steps and batch_paths are settings of "
+                             "scheduler='cuda'")
     _observable_function(model, observable)  # refuse a bad observable before any path is run
     device = {}
     if gpu:
