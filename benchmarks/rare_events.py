@@ -78,17 +78,17 @@ def row(name, est, reference, per_path, measured_bf=None):
     return vr
 
 
-def coverage(calls: int) -> None:
-    """The 95 % interval's coverage of the exact answer over seeds, at clones 200 and 1000."""
-    print(f"\nCoverage over {calls} seeds (OU, 8 replicas each):")
+def coverage(calls: int, replicas: int = 8, clone_counts=(200, 1000), first_seed: int = 10_000) -> None:
+    """The 95 % interval's coverage of the exact answer over seeds ``first_seed`` .. ``first_seed + calls - 1``."""
+    print(f"\nCoverage over {calls} seeds (OU, {replicas} replicas each):")
     print("| P (exact) | clones | pooled mean / exact | coverage | misses low / high | one replica's rel. var. | CPU s "
           "per estimate |")
     print("|---|---|---|---|---|---|---|")
     for b, levels, _ in OU_LEVELS:
         exact = euler_ou_exceedance(b)
-        for clones in (200, 1000):
+        for clones in clone_counts:
             est = [splitting_probability(ou(), "x", b, levels=levels, t_max=1.0, x0=(0.0,), dt=0.01, clones=clones,
-                                         replicas=8, scheme="em", seed=10_000 + k) for k in range(calls)]
+                                         replicas=replicas, scheme="em", seed=first_seed + k) for k in range(calls)]
             reps = np.concatenate([e.replicas for e in est])
             pooled, se = reps.mean() / exact, 1.96 * reps.std(ddof=1) / math.sqrt(len(reps)) / exact
             low = np.mean([e.probability + e.ci < exact for e in est])
@@ -102,13 +102,16 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer clones and paths (a smoke run)")
     parser.add_argument("--coverage", type=int, nargs="?", const=100, default=0, metavar="CALLS",
                         help="instead, repeat the OU estimates over CALLS seeds (default 100) and count the coverage")
+    parser.add_argument("--replicas", type=int, default=8, help="with --coverage: replicas per estimate")
+    parser.add_argument("--clones", type=int, nargs="+", default=[200, 1000], help="with --coverage: clone counts")
+    parser.add_argument("--first-seed", type=int, default=10_000, help="with --coverage: the first seed")
     args = parser.parse_args()
     scale = 4 if args.quick else 1
     warnings.simplefilter("always", RareEventWarning)
     # the OU level is read at step ends on purpose: the exact answer is that of the Euler chain, so dt's bias is moot
     warnings.simplefilter("ignore", StepSizeWarning)
     if args.coverage:
-        coverage(args.coverage)
+        coverage(args.coverage, args.replicas, tuple(args.clones), args.first_seed)
         return
 
     print("1. OU process, em, dt = 0.01, t_max = 1 (exact: the Euler chain by quadrature)")
