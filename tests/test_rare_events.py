@@ -120,7 +120,8 @@ def test_splitting_requests_are_checked():
 @pytest.mark.filterwarnings("ignore:.*had not left the domain")  # most mc paths are censored at t_max, by design
 def test_vibro_splitting_and_mc_watch_the_same_corrected_level():
     # both move the level in by the continuity correction (default): the same probability, which the plain level
-    # undercounts by about 12 % at dt = 0.01 (docs/results/rare-events.md)
+    # undercounts by about 12 % at dt = 0.01 against the dt -> 0 limit, 10 % against the corrected level
+    # (docs/results/rare-events.md)
     import vibro
 
     model, kw = DuffingImpact(restitution=Ma(0.4)), {"dt": 0.01, "t_max": 10.0, "scheme": "splitting", "seed": 5}
