@@ -336,20 +336,9 @@ def main(argv):
         for dt, paths, seed in VALIDATE:
             print(f"run 0.25 {dt} {paths} {seed} --uncorrected")
         return 0
-    if argv[0] == "reference":
-        reference()
-        return 0
-    if argv[0] == "survival":
-        survival()
-        return 0
-    if argv[0] == "compare":
-        compare()
-        return 0
-    if argv[0] == "oracle":
-        oracle()
-        return 0
-    if argv[0] == "trend":
-        trend()
+    reports = {"reference": reference, "survival": survival, "compare": compare, "oracle": oracle, "trend": trend}
+    if argv[0] in reports:  # the commands that take no arguments
+        reports[argv[0]]()
         return 0
     if argv[0] == "validate":
         rows = [r for r in load_runs() if r["H_c"] == 0.25]
