@@ -325,8 +325,8 @@ def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, d
         other paths, and spectra that agree within their intervals, not bitwise.
     precision, threads_per_block, launch_steps, batch_paths :
         ``cuda`` only: the kernel's float type, its block size and steps per launch (no number depends on these
-        two), and the paths recorded per batch (a multiple of ``chunk_paths``; default: as many as half the device
-        memory, at most 4 GB, holds; no number depends on it either).
+        two), and the paths recorded per batch (a multiple of ``chunk_paths``; default: as many as a quarter of
+        the device's free memory, at most 4 GB, holds, so that two batches fit; no number depends on it either).
 
     Returns
     -------
