@@ -138,6 +138,8 @@ def test_a_user_oscillator_with_an_ou_filter_meets_the_closed_form_response(tmp,
     rc = _run(["mc", "--model", f"{tmp}/user.py:Linear", "--filter", "ou", "--param", f"alpha={alpha}",
                "--scheme", "splitting", "--dt", dt, "--paths", "64", "--t-end", "1500", "--t-burn", "30",
                "--h-max", "20", "--bins", "20", "--observable", "z2=z**2", "--range", "z2=0:1000:1",
+               # x2 and y2 too: the observables (and kernel) of test_excitation.py's OU runs
+               "--observable", "x2=x**2", "--range", "x2=0:1000:1", "--observable", "y2=y**2", "--range", "y2=0:1000:1",
                "--out", out, "--summary-json", summary])
     assert rc == 0, capsys.readouterr().err
     rec = json.loads(summary.read_text())

@@ -68,9 +68,12 @@ def splitting_chain(dt, b, wf2):
 
 
 def run(A, dt, seed, t_end=1500.0):
+    # the model's H first, then z2, x2, y2: the observables (and so the kernel) of the OU-filtered `vibro mc` run in
+    # test_cli_automaton_mc.py
     return simulate_automaton(A, "splitting", dt=dt, paths=64, t_end=t_end, t_burn=30.0, x0=(0, 0, 0, 0),
-                              seed=seed, chunk_paths=4, observables={"z2": "z**2", "x2": "x**2", "y2": "y**2"},
-                              histograms={"z2": (0, 1e3, 1), "x2": (0, 1e3, 1), "y2": (0, 1e3, 1)})
+                              seed=seed, chunk_paths=4,
+                              observables={"H": A.observables["H"], "z2": "z**2", "x2": "x**2", "y2": "y**2"},
+                              histograms={"H": (0, 1e3, 1), "z2": (0, 1e3, 1), "x2": (0, 1e3, 1), "y2": (0, 1e3, 1)})
 
 
 def check(ens, exact, chain):
