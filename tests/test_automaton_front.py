@@ -19,7 +19,7 @@ import sympy as sp
 
 from hybrid import HybridAutomaton, Mode, Transition
 from hybrid.errors import ParameterError, VibroWarning
-from hybrid.stochastic import AUTOMATON_SCHEMES, simulate_automaton, simulate_ensemble
+from hybrid.stochastic import AUTOMATON_SCHEMES, SCHEMES, simulate_automaton, simulate_ensemble
 from models import DuffingImpact, Elastic, Newton
 
 SLOW = pytest.mark.slow  # about 12 s each (two cold kernel compiles)
@@ -117,6 +117,7 @@ def test_baoab_samples_the_exact_position_variance_of_a_harmonic_oscillator_at_a
     # precise enough to see the bias BAOAB avoids: the symplectic Milstein's 1.071 +- 0.008 at this step
     assert b.mean_x2.ci < 0.015
     assert AUTOMATON_SCHEMES["baoab"].orders(None) == {"strong": 1.0, "weak": 2.0}
+    assert SCHEMES["splitting"].strong_order == 1.0  # the oscillator's name for it declares the same (fitted below)
 
 
 def test_baoab_refuses_damping_or_noise_it_cannot_step_exactly():

@@ -290,6 +290,11 @@ def test_strong_orders_em_half_milstein_one_with_multiplicative_noise():
         assert abs(fit_slope(dts, errs) - SCHEMES[scheme].strong_order) < 0.2, (scheme, errs)
 
 
+# a kernel of its own (the drive of Example 1 without walls): the default suite fits the same scheme's strong order 1
+# with additive noise (splitting is the automaton's baoab, AUTOMATON_SCHEME_OF) in test_automaton_front.py's
+# two-degree-of-freedom test, and checks that the oscillator's splitting is that BAOAB there too (its exact position
+# variance at dt = 0.5 through simulate_ensemble)
+@pytest.mark.slow
 def test_strong_order_splitting_additive_noise():
     model = DuffingImpact(restitution=Elastic(), a=1.0, b=0.2, c=0.5, D=0.5, delta=INF)
     z = np.random.default_rng(4).standard_normal((1000, 2**12))
