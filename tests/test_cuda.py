@@ -223,32 +223,30 @@ def test_cuda_without_the_package_is_a_one_line_error():
     assert len(out) == 1 and out[0].startswith("ERR ") and 'pip install -e ".[cuda]"' in out[0], out
 
 
-@needs_sim
-def test_cuda_without_a_device_is_a_one_line_error():
-    from numba import cuda
-
-    if cuda.is_available():
-        pytest.skip("a CUDA device is present")
-    out = _run(_CALL)
-    assert len(out) == 1 and out[0].startswith("ERR ") and (
-        "no CUDA device was found" in out[0] or 'pip install -e ".[cuda]"' in out[0]), out
-    assert issubclass(CudaUnavailableError, ValueError)
+_CLI_CALL = ("import sys\n"
+             "from vibro.cli import main\n"
+             "print('RC', main(['mc', '--scheduler', 'cuda', '--precision', 'f32', '--dt', '0.01', '--paths', '4',"
+             " '--t-end', '1', '--t-burn', '0.5', '--out', sys.argv[1]]))\n")
 
 
 @needs_sim
-def test_cli_scheduler_cuda_without_a_device_is_one_line(tmp_path):
+def test_cuda_without_a_device_is_a_one_line_error_in_python_and_on_the_command_line(tmp_path):
+    # one interpreter without the simulator for both checks: simulate_ensemble's error, then vibro mc's
     from numba import cuda
 
     if cuda.is_available():
         pytest.skip("a CUDA device is present")
     e = _env()
-    e.pop("NUMBA_ENABLE_CUDASIM", None)
-    code = "import sys; from vibro.cli import main; sys.exit(main(sys.argv[1:]))"
-    r = subprocess.run([sys.executable, "-c", code, "mc", "--scheduler", "cuda", "--precision", "f32", "--dt", "0.01",
-                        "--paths", "4", "--t-end", "1", "--t-burn", "0.5", "--out", str(tmp_path / "h.csv")],
-                       cwd=ROOT, env=e, capture_output=True, text=True, timeout=300)
+    e.pop("NUMBA_ENABLE_CUDASIM", None)  # a real device, or none
+    r = subprocess.run([sys.executable, "-c", _CALL + _CLI_CALL, str(tmp_path / "h.csv")], cwd=ROOT, env=e,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = r.stdout.strip().splitlines()
+    assert len(out) == 2 and out[0].startswith("ERR ") and (
+        "no CUDA device was found" in out[0] or 'pip install -e ".[cuda]"' in out[0]), out
+    assert issubclass(CudaUnavailableError, ValueError)
     lines = r.stderr.strip().splitlines()
-    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert out[1] == "RC 2" and len(lines) == 1, r.stderr
     assert lines[0].startswith("vibro mc: error: --scheduler='cuda'"), r.stderr
 
 
