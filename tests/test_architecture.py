@@ -10,8 +10,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parent.parent
 LAYERS = ["hybrid", "models", "averaging", "vibro"]
 """Lowest first: a module may import its own layer and the ones before it."""
@@ -138,15 +136,19 @@ def test_cli_names_match_the_registries():
     assert names.SOLVE_METHODS == SOLVE_METHODS
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["--version"], ["mc", "--help"], ["pdf", "--help"],
-                                  ["orbit", "--help"], ["solve", "--help"], ["figure", "--help"]])
-def test_cli_help_imports_no_heavy_library(argv):
-    # what makes `vibro --help` slow is importing sympy, numba or scipy; assert on the modules, not on a time
+def test_cli_help_imports_no_heavy_library():
+    # what makes `vibro --help` slow is importing sympy, numba or scipy; assert on the modules, not on a time. One
+    # fresh interpreter runs every help in turn and lists the heavy modules after each: while none is imported, each
+    # help starts as it would in an interpreter of its own
     heavy = ("sympy", "numba", "scipy", "matplotlib", "pandas")
-    code = (f"import sys; from vibro.cli import main\ntry:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
-            f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
+    argvs = [["--help"], ["--version"], ["mc", "--help"], ["pdf", "--help"], ["orbit", "--help"], ["solve", "--help"],
+             ["figure", "--help"]]
+    code = (f"import sys; from vibro.cli import main\nfor argv in {argvs!r}:\n    try:\n        main(argv)\n"
+            f"    except SystemExit:\n        pass\n"
+            f"    print('HEAVY', argv, sorted(m for m in {heavy!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True).stdout
-    assert out.strip().splitlines()[-1] == "[]"
+    lines = [line for line in out.splitlines() if line.startswith("HEAVY ")]
+    assert lines == [f"HEAVY {argv!r} []" for argv in argvs], lines
 
 
 def test_solve_by_fpk_imports_only_what_it_uses(tmp_path):
