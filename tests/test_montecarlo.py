@@ -604,6 +604,8 @@ def test_dask_local_cluster_gives_the_thread_numbers():
         assert np.array_equal(getattr(local, f), getattr(remote, f)), f
 
 
+# the docs build in CI runs every example too (this one at 256 paths), and stops on a failed self-check
+@pytest.mark.slow
 def test_example_03_runs_headless_and_checks_itself(tmp_path):
     script = os.path.join(os.path.dirname(__file__), "..", "examples", "03_stochastic_ensemble.py")
     res = subprocess.run([sys.executable, script, "--outdir", str(tmp_path), "--paths", "128"], capture_output=True,
