@@ -1068,13 +1068,6 @@ def outside(mode, x, t, p):
 
 '''
 _TEMPLATE_CHUNK = '''\
-def chunk_work():
-    """Fresh work arrays for one ``run_chunk`` call, in the order it unpacks them."""
-    return (np.empty(N), np.empty(WORK), np.empty(M), np.empty(N_OBS), np.empty((LANES, N)),
-            np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64), np.empty((LANES, M)),
-            np.empty((LANES, 2)), np.zeros(IW, dtype=np.int64), np.zeros(FW), np.empty((N, LANES)))
-
-
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
@@ -1150,6 +1143,13 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
         gstat[j, 3] = max(gstat[j, 3], fw[gs + 3])
 {flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
+
+
+def chunk_work():
+    """Fresh work arrays for one ``run_chunk`` call, in the order it unpacks them."""
+    return (np.empty(N), np.empty(WORK), np.empty(M), np.empty(N_OBS), np.empty((LANES, N)),
+            np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64), np.empty((LANES, M)),
+            np.empty((LANES, 2)), np.zeros(IW, dtype=np.int64), np.zeros(FW), np.empty((N, LANES)))
 '''
 _TEMPLATE = _TEMPLATE_HEAD + _TEMPLATE_EVENTS + _TEMPLATE_DRIVE + _TEMPLATE_OUTSIDE + _TEMPLATE_CHUNK
 
