@@ -564,6 +564,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         flush=ind("\n".join(f"sums[{o}] += _sum{o}" for o in range(len(obs))) or "pass",
                   " " * 4),
         alloc=ind("\n".join(f"_L{i} = np.empty(LANES)" for i in range(n)), " " * 4),
+        lane_rows=ind("\n".join(f"_L{i} = LW[{i}]" for i in range(n)), " " * 4),
         init=ind("\n".join(f"_L{i}[_l] = x0[{i}]" for i in range(n)), " " * 12),
         phase_block=ind(_PHASES.format(pack=ind("\n".join(f"XL[_l, {i}] = _L{i}[_l]" for i in range(n)), " " * 8))
                         if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
@@ -746,7 +747,7 @@ def _illinois_body(step: str, flight: str, guard: str, at_zero: str = "", end: s
         return 0.0
     a, b = 0.0, 1.0
     fa, fb = g0, g1
-    side = 0
+    side = np.int64(0)
     s = 1.0
     fs = g1
     for _ in range(100):
@@ -909,7 +910,7 @@ def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track,
 # pieces the kernel templates share (the CPU chunk and record loops, and the CUDA kernel's step loop)
 _LANE_GROUP = """\
     for _g in range(0, npaths, LANES):
-        nl = min(LANES, npaths - _g)
+        nl = npaths - _g if npaths - _g < LANES else LANES  # not min(): its overload is compiled apart
         for _l in range(nl):
 {init}
             ML[_l] = mode0
@@ -1071,7 +1072,7 @@ _TEMPLATE_CHUNK = '''\
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
               v_scale, v_bins, vhist, counts, sums, events, gstat, track, n_phase, phase_steps,
-              phist, psums, pcount, vsum, fbad, elogs, nlogs):
+              phist, psums, pcount, vsum, fbad, elogs, nlogs, work):
     """Paths of one chunk; histograms (with underflow bin 0 and overflow bin last), sums and event counts.
 
     Paths run in groups of LANES interleaved lanes (their independent dependency chains overlap in the CPU), each
@@ -1095,24 +1096,17 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
     s0, s1, s2, s3 = state[0], state[1], state[2], state[3]
     sdt = math.sqrt(dt)
     hdt = 0.5 * dt
-    x = np.empty(N)
-    ws = np.empty(WORK)  # event_step's work arrays in one (each array argument costs registers at the call)
-    dw = np.empty(M)
-    ob = np.empty(N_OBS)
-    XL = np.empty((LANES, N))
-    ML = np.empty(LANES, dtype=np.int64)
-    PL = np.empty(LANES, dtype=np.int64)  # lanes of this step that go through event_step, and their increments
-    DWL = np.empty((LANES, M))
-    JL = np.empty((LANES, 2))  # the lanes' coordinates in the joint histogram
-    iw = np.zeros(IW, dtype=np.int64)
-    fw = np.zeros(FW)
+    # the work arrays come from chunk_work(): an allocation in the kernel costs its compile about 0.5 s
+    # ws: event_step's work arrays in one (each array argument costs registers at the call); PL, DWL: the lanes of
+    # this step that go through event_step, and their increments; JL: the lanes' coordinates in the joint histogram
+    x, ws, dw, ob, XL, ML, PL, DWL, JL, iw, fw, LW = work
     for j in range(N_TRANS):
         fw[FW_GSTAT + 4 * j + 2] = np.inf
         fw[FW_GSTAT + 4 * j + 3] = -np.inf
-    _nsamp = 0
-{alloc}
+    _nsamp = np.int64(0)  # counters start as np.int64, not as literal 0: a literal costs type inference a pass
+{lane_rows}
 {unpack}
-''' + _LANE_GROUP + '''        cs = 0
+''' + _LANE_GROUP + '''        cs = np.int64(0)
         for step in range(n_burn + n_samp * stride):
 ''' + step_head(12, "cs", "step", "(step + 1)") + '''{lane_step}
             # statistics in loops of their own: the stepping loop above, and the time average's loop, stay short
@@ -1149,12 +1143,19 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
         gstat[j, 3] = max(gstat[j, 3], fw[gs + 3])
 {flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
+
+
+def chunk_work():
+    """Fresh work arrays for one ``run_chunk`` call, in the order it unpacks them."""
+    return (np.empty(N), np.empty(WORK), np.empty(M), np.empty(N_OBS), np.empty((LANES, N)),
+            np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64), np.empty((LANES, M)),
+            np.empty((LANES, 2)), np.zeros(IW, dtype=np.int64), np.zeros(FW), np.empty((N, LANES)))
 '''
 _TEMPLATE = _TEMPLATE_HEAD + _TEMPLATE_EVENTS + _TEMPLATE_DRIVE + _TEMPLATE_OUTSIDE + _TEMPLATE_CHUNK
 
 
 _LANE_STEP = '''\
-            npend = 0
+            npend = np.int64(0)
             for _l in range(nl):
 {load}
 {draw}
@@ -1229,7 +1230,7 @@ elif SCHEME == 3:
 """ + textwrap.indent(_MILSTEIN_VELOCITIES.format(state="x", store="xr[i] = acc"), " " * 4) + """
     for kv in range(N_POS):
         x[VEL[kv]] += xr[VEL[kv]]
-n_ev = 0"""
+n_ev = np.int64(0)"""
 
 
 _NAIVE_OPENING = """\
@@ -1242,7 +1243,7 @@ for kv in range(N_POS):
     for k in range(M):
         acc += G[i * M + k] * dw[k]
     x[i] += acc
-n_ev = 0"""
+n_ev = np.int64(0)"""
 
 
 _NAIVE_DROP = """
@@ -1315,9 +1316,6 @@ def _velocity_leg_call(kind: str, when: str) -> str:
             "iw, fw, ws, elog, n_ev)")
 
 
-# where a guard depends on a velocity: the opening sub-step is the plain one (no guard is read on its state, whose
-# velocities are those of another instant than its positions: the flight reads it from the velocities at the step's
-# start); n_ev as np.int64, not a literal, so that velocity_leg is compiled once
 def _replace_once(text: str, old: str, new: str) -> str:
     """``text`` with its one ``old`` replaced: a template that no longer holds it exactly once must fail loudly here,
     not generate a kernel that silently skips the located sub-step."""
@@ -1326,7 +1324,10 @@ def _replace_once(text: str, old: str, new: str) -> str:
     return text.replace(old, new)
 
 
-_LOCATED_OPENING = _replace_once(_PLAIN_OPENING, "n_ev = 0", "n_ev = np.int64(0)")
+# where a guard depends on a velocity: the opening sub-step is the plain one (no guard is read on its state, whose
+# velocities are those of another instant than its positions: the flight reads it from the velocities at the step's
+# start)
+_LOCATED_OPENING = _PLAIN_OPENING
 
 
 _LOCATED_O_STEP = _velocity_leg_call("OU", "t")

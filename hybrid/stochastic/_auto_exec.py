@@ -256,7 +256,7 @@ class AutomatonJob:
                          a["jx"], a["jy"], a["j_lo"], a["j_scale"], a["j_bins"], out["jhist"], a["v_scale"],
                          a["v_bins"], out["vhist"], out["counts"], out["sums"], out["events"],
                          out["gstat"], track, a["phases"], a["phase_steps"], out["phist"], out["psums"], out["pcount"],
-                         out["vsum"], out["fbad"], out["elog"], out["nlog"])
+                         out["vsum"], out["fbad"], out["elog"], out["nlog"], module.chunk_work())
 
 
 def _remote(job: AutomatonJob, k: int, rng_state: np.ndarray):

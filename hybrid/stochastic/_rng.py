@@ -20,11 +20,16 @@ from hybrid.errors import ParameterError
 
 _U53 = 1.0 / 9007199254740992.0  # 2**-53
 _LAYERS = 256
+# the shift amounts and masks as uint64 constants of the module: numba freezes them, where each ``np.uint64(k)``
+# inside the inlined generator was a call to type in every kernel (76 of them, about 0.3 s of each cold compile)
+_U1, _U5, _U7, _U8, _U9, _U11, _U17, _U19, _U45, _U57, _U255 = (
+    np.uint64(k) for k in (1, 5, 7, 8, 9, 11, 17, 19, 45, 57, 255))
 
 
 @nb.njit(inline="always")
-def _rotl(v, k):
-    return (v << np.uint64(k)) | (v >> np.uint64(64 - k))
+def _rotl(v, left, right):
+    # rotate left by ``left`` bits (``right`` = 64 - left)
+    return (v << left) | (v >> right)
 
 
 @nb.njit(inline="always")
@@ -38,14 +43,14 @@ def next_u64(s0, s1, s2, s3):
     >>> int(next_u64(*s)[0])
     11520
     """
-    out = _rotl(s1 * np.uint64(5), 7) * np.uint64(9)
-    t = s1 << np.uint64(17)
+    out = _rotl(s1 * _U5, _U7, _U57) * _U9
+    t = s1 << _U17
     s2 ^= s0
     s3 ^= s1
     s1 ^= s2
     s0 ^= s3
     s2 ^= t
-    s3 = _rotl(s3, 45)
+    s3 = _rotl(s3, _U45, _U19)
     return out, s0, s1, s2, s3
 
 
@@ -61,7 +66,7 @@ def next_uniform(s0, s1, s2, s3):
     True
     """
     b, s0, s1, s2, s3 = next_u64(s0, s1, s2, s3)
-    return ((b >> np.uint64(11)) + np.uint64(1)) * _U53, s0, s1, s2, s3
+    return ((b >> _U11) + _U1) * _U53, s0, s1, s2, s3
 
 
 @nb.njit(inline="always")
@@ -80,9 +85,9 @@ def next_normal(s0, s1, s2, s3, zx, zk, zf):
     """
     while True:
         b, s0, s1, s2, s3 = next_u64(s0, s1, s2, s3)
-        i = np.int64(b & np.uint64(255))
-        neg = (b >> np.uint64(8)) & np.uint64(1)
-        u = (b >> np.uint64(11)) * _U53
+        i = np.int64(b & _U255)
+        neg = (b >> _U8) & _U1
+        u = (b >> _U11) * _U53
         z = u * zx[i]
         if u < zk[i]:  # inside the rectangle: about 99 % of draws
             return (-z if neg else z), s0, s1, s2, s3
