@@ -251,11 +251,14 @@ def test_corrupt_kernel_cache_entry_is_rebuilt(tmp_path):
     module = _front.kernel_module(DuffingImpact(), "milstein")[0]
     source = Path(module.__file__)
     if os.environ.get("NUMBA_CACHE_DIR"):
-        # numba's entries of the shared cache are elsewhere: garble copies of run_chunk's own (index and machine
-        # code), which the second process compiles, beside the module (building them in a first process cost a
-        # compile and an interpreter start)
+        # numba's entries of the shared cache are elsewhere: garble copies, beside the module, of those of every
+        # function the run compiles (index and machine code; building them in a first process cost a compile and an
+        # interpreter start)
         shared = Path(module.run_chunk._cache.cache_path)
-        numba_entries = [(p, tmp_path / "__pycache__" / p.name) for p in shared.glob(f"{module.__name__}.run_chunk-*")]
+        compiled = ("run_chunk", "event_step", "model", "locate", "interpolate", "crosses", "outside")
+        numba_entries = [(p, tmp_path / "__pycache__" / p.name) for name in compiled
+                         for p in shared.glob(f"{module.__name__}.{name}-*")]
+        assert {p.name.split("-")[0].rsplit(".", 1)[1] for p, _ in numba_entries} == set(compiled)
     else:
         numba_entries = [(p, tmp_path / p.relative_to(source.parent))
                          for p in source.parent.glob(f"__pycache__/{module.__name__}.*")]
