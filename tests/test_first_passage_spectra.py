@@ -231,8 +231,8 @@ def test_monte_carlo_level_is_moved_in_by_the_continuity_correction():
 @pytest.mark.slow  # compiles two kernels of its own, 40,000 paths each (about 40 CPU s each)
 def test_monte_carlo_first_passage_with_the_exit_as_a_guard():
     # against the converged reference of benchmarks/data/first_passage_reference.json (5.1618 +- 0.0185, splitting
-    # at two steps); measured before the fix of the velocity guards' reading: corrected 5.1805 +- 0.0369,
-    # uncorrected 5.2857 +- 0.0377 (+2.3 %)
+    # at two steps); measured on 27 November: corrected 5.1830 +- 0.0369 (+0.4 %), uncorrected 5.2890 +- 0.0377
+    # (+2.5 %)
     from pathlib import Path
 
     m = DuffingImpact(restitution=Ma(vc=0.4))
