@@ -182,10 +182,11 @@ COMPILE_LOG = logging.getLogger("hybrid.stochastic.compile")
 compilation starts (``extra``: ``kernel``, e.g. ``duffing/milstein``, and ``estimate_s``). The library prints nothing
 by itself; the command line turns the record into one line on stderr, so a first run's wait is not a silent one."""
 
-COMPILE_ESTIMATE_S = {"vibro_auto": 10, "vibro_auto_cuda": None}
+COMPILE_ESTIMATE_S = {"vibro_auto": 8, "vibro_auto_cuda": None}
 """About how long a cold compile takes, by kernel family, the module name's prefix (the longest that matches): the
-CPU kernels of the automaton generator take 7 - 11 CPU s on 2 cores (docs/results/compile-time.md); only said to the
-user. Compiles of the CUDA kernels have not been measured (None: no figure is claimed)."""
+CPU kernels of the automaton generator take 6 - 9 CPU s on 2 cores (medians 6.0 - 7.4 on a quiet machine,
+docs/results/compile-time.md); only said to the user. Compiles of the CUDA kernels have not been measured (None: no
+figure is claimed)."""
 
 
 def _label(name: str) -> str:
