@@ -582,7 +582,10 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
                         or "pass", " " * 4),
         lane_to_out=ind("\n".join(f"out[_g + _l, (step + 1) // every, {i}] = _L{i}[_l]" for i in range(n)),
                         " " * 20),
-        opening=ind(_NAIVE_OPENING if scheme == "naive" else _LOCATED_OPENING if located else _PLAIN_OPENING,
+        # where a guard depends on a velocity the opening sub-step is the plain one too: no guard is read on its
+        # state, whose velocities are of another instant than its positions (the flight reads the guard from the
+        # velocities at the step's start)
+        opening=ind(_NAIVE_OPENING if scheme == "naive" else _PLAIN_OPENING,
                     " " * 4),
         fire=ind(_FIRE.format(when="t + best_s * tau") + (_NAIVE_DROP if scheme == "naive" else ""), " " * 12),
         o_step=ind(_LOCATED_O_STEP if located else _PLAIN_O_STEP, " " * 12),
@@ -1322,12 +1325,6 @@ def _replace_once(text: str, old: str, new: str) -> str:
     if text.count(old) != 1:
         raise AssertionError(f"the template changed: {old[:60]!r} is there {text.count(old)} times")
     return text.replace(old, new)
-
-
-# where a guard depends on a velocity: the opening sub-step is the plain one (no guard is read on its state, whose
-# velocities are those of another instant than its positions: the flight reads it from the velocities at the step's
-# start)
-_LOCATED_OPENING = _PLAIN_OPENING
 
 
 _LOCATED_O_STEP = _velocity_leg_call("OU", "t")
