@@ -120,8 +120,8 @@ def test_the_recording_kernel_is_the_ensemble_kernel_plus_its_records():
     plain, _ = _auto_cuda.generate_cuda_source(automaton, "baoab", observables, lay=lay, cache=False)
     rec, _ = _auto_cuda.generate_cuda_source(automaton, "baoab", observables, lay=lay, cache=False, record=True)
     assert not re.search(r"\b(REC|ip0)\b", plain) and re.search(r"\bREC\[ip, _r, 1\] = _x1\b", rec)
-    undone = (rec.replace("elogs, gh, ip0, REC):", "elogs, gh):").replace("normal_pair(k0, k1, ip0 + ip,",
-                                                                          "normal_pair(k0, k1, ip,"))
+    undone = (rec.replace("elogs, gh, ip0, REC):", "elogs, gh):").replace("normal_pair(rk, ip0 + ip,",
+                                                                          "normal_pair(rk, ip,"))
     undone = re.sub(r"\n +_r = \(step \+ 1 - n_burn\) // stride - 1\n( +REC\[ip, _r, \d\] = _x\d\n)+", "\n", undone)
     assert undone == plain
 

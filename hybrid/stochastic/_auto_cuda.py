@@ -127,7 +127,7 @@ def count(sh, gh, i):
 
 
 @cuda.jit({jit_options})
-def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale, obs_bins, jx, jy, j_lo, j_scale,
+def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, obs_lo, obs_scale, obs_bins, jx, jy, j_lo, j_scale,
             j_bins, v_scale, v_bins, track, n_phase, phase_steps, XS, MS, CNT, SM, PSM, IWS, FWS, elogs, gh):
     """Steps [n0, n1) of paths 0 .. npath-1, one thread each; every path's row in XS .. FWS in and out."""
     sh = cuda.shared.array(SH, int32)
@@ -158,6 +158,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale,
         mode = MS[ip]
 {rows_in}
         _cs = (n0 - n_burn) % stride if n0 > n_burn else 0  # recorded steps since the last sample
+        _nsamp = np.int64(0)  # samples of this launch: a scalar, counts[] lives in local memory
         _zp = np.uint64(0xFFFFFFFFFFFFFFFF)  # the Philox counter of the normals in _za, _zb (none yet)
         _za = _fty(0.0)
         _zb = _fty(0.0)
@@ -192,7 +193,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale,
                         count(sh, gh, P_OFF + (kp * N_OBS + o) * WIDTH + cell)
                 if not sample:
                     continue
-                counts[0] += 1
+                _nsamp += 1
 ''' + _auto_codegen.SAMPLE_CHECKS + '''                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
                     by = (ob[jy] - j_lo[1]) * j_scale[1]
                     if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
@@ -205,6 +206,7 @@ def advance(n0, n1, npath, n_burn, stride, k0, k1, dt, t0, p, obs_lo, obs_scale,
             IWS[ip, _i] = iw[_i]
         for _i in range(FW):
             FWS[ip, _i] = fw[_i]
+        counts[0] += _nsamp
         for _i in range(6):
             CNT[ip, _i] = counts[_i]
     cuda.syncthreads()
@@ -219,7 +221,7 @@ _CUDA_TEMPLATE = (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPL
 set test, around the kernel above."""
 
 _RECORD_SIGNATURE = ("elogs, gh):\n", "elogs, gh, ip0, REC):\n")
-_RECORD_AT = "                counts[0] += 1\n"
+_RECORD_AT = "                _nsamp += 1\n"
 _CUDA_TEMPLATE_RECORD = (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPLATE_EVENTS
                          + _auto_codegen._TEMPLATE_OUTSIDE
                          + _KERNEL.replace(*_RECORD_SIGNATURE).replace(_RECORD_AT, _RECORD_AT + "{record_rows}\n"))
@@ -328,7 +330,7 @@ def generate_cuda_source(automaton, scheme: str, observables: dict, convention: 
                  "_q = np.uint64(step)",
                  "if (_q >> np.uint64(1)) != _zp:",
                  "    _zp = _q >> np.uint64(1)",
-                 f"    _za, _zb = normal_pair(k0, k1, {'ip0 + ip' if record else 'ip'}, _zp)",
+                 f"    _za, _zb = normal_pair(rk, {'ip0 + ip' if record else 'ip'}, _zp)",
                  f"_w{k} = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)"]
     draw.append("_slow = False")
     jit_options = "cache=True" if cache else ""
@@ -424,11 +426,22 @@ class CudaRun:
         self.name = f"vibro_auto_cuda_{scheme}_{precision}_{where}_{_auto_codegen.kernel_key(src)}"
         self.module, _ = _kernel_modules.load_source(self.name, src, label=f"automaton/{scheme} (CUDA, {precision})")
         self.key = _cuda_rng.seed_key(seed)
+        self.round_keys = _cuda_rng.round_keys(*self.key)  # launch arguments: read from the constant bank
         ft = self.ft
-        self.scalars = (ft(a["dt"]), ft(0.0), a["p"].astype(ft), a["obs_lo"].astype(ft), a["obs_scale"].astype(ft),
-                        a["obs_bins"].astype(np.int64), np.int64(a["jx"]), np.int64(a["jy"]), a["j_lo"].astype(ft),
-                        a["j_scale"].astype(ft), a["j_bins"].astype(np.int64), ft(a["v_scale"]),
-                        np.int64(a["v_bins"]))
+        # the parameters and the histograms' ranges as tuples: launch arguments, which the device reads from its
+        # constant bank (arrays are loaded once into registers that the whole step loop holds); one unused value
+        # when a model has no parameters
+        params = tuple(ft(v) for v in a["p"]) or (ft(0.0),)
+
+        def floats(v):
+            return tuple(ft(w) for w in v)
+
+        def ints(v):
+            return tuple(np.int64(w) for w in v)
+
+        self.scalars = (ft(a["dt"]), ft(0.0), params, floats(a["obs_lo"]), floats(a["obs_scale"]), ints(a["obs_bins"]),
+                        np.int64(a["jx"]), np.int64(a["jy"]), floats(a["j_lo"]), floats(a["j_scale"]),
+                        ints(a["j_bins"]), ft(a["v_scale"]), np.int64(a["v_bins"]))
         self._check_memory(int(job.npaths.sum()))  # before any compile or launch
 
     def fresh(self, paths: int) -> dict:
@@ -449,8 +462,8 @@ class CudaRun:
         blocks = max(1, -(-paths // self.tpb))
         dt, t0, *rest = self.scalars
         self.module.advance[blocks, self.tpb](
-            np.int64(n0), np.int64(n1), np.int64(paths), np.int64(n_burn), np.int64(a["stride"]), *self.key, dt, t0,
-            *rest, bool(track), np.int64(a["phases"]), np.int64(a["phase_steps"]),
+            np.int64(n0), np.int64(n1), np.int64(paths), np.int64(n_burn), np.int64(a["stride"]), self.round_keys,
+            dt, t0, *rest, bool(track), np.int64(a["phases"]), np.int64(a["phase_steps"]),
             *(dev[k] for k in self.ORDER))
         self.cuda.synchronize()
 
@@ -621,8 +634,9 @@ class CudaRecorder(CudaRun):
         blocks = max(1, -(-paths // self.tpb))
         dt, t0, *rest = self.scalars
         self.module.advance[blocks, self.tpb](
-            np.int64(n0), np.int64(n1), np.int64(paths), np.int64(a["n_burn"]), np.int64(a["stride"]), *self.key, dt,
-            t0, *rest, False, np.int64(0), np.int64(1), *(dev[k] for k in self.ORDER), np.int64(lo), rec)
+            np.int64(n0), np.int64(n1), np.int64(paths), np.int64(a["n_burn"]), np.int64(a["stride"]),
+            self.round_keys, dt, t0, *rest, False, np.int64(0), np.int64(1), *(dev[k] for k in self.ORDER),
+            np.int64(lo), rec)
         self.cuda.synchronize()
 
 
@@ -694,9 +708,10 @@ def kernel_resources(settings: dict) -> dict:
             "blocks_per_sm": blocks, "occupancy": occupancy}
 
 
-def kernel_signature(precision: str = "f64", record: bool = False) -> tuple:
+def kernel_signature(precision: str = "f64", record: bool = False, n_params: int = 1, n_obs: int = 1) -> tuple:
     """numba types of the arguments of ``advance``, in the order :meth:`CudaRun.advance` passes them (``record``:
-    the recording variant's, as :meth:`CudaRecorder._launch` passes them)."""
+    the recording variant's, as :meth:`CudaRecorder._launch` passes them), for a model of ``n_params``
+    parameters and ``n_obs`` observables."""
     from numba import types as t
 
     f = t.float32 if precision == "f32" else t.float64
@@ -705,8 +720,10 @@ def kernel_signature(precision: str = "f64", record: bool = False) -> tuple:
     def arr(dtype, ndim):
         return t.Array(dtype, ndim, "C")
 
-    return (i, i, i, i, i, t.uint64, t.uint64, f, f, arr(f, 1), arr(f, 1), arr(f, 1), arr(i, 1), i, i, arr(f, 1),
-            arr(f, 1), arr(i, 1), f, i, t.boolean, i, i, arr(f, 2), arr(i, 1), arr(i, 2), arr(d, 2), arr(d, 3),
+    no = max(n_obs, 1)
+    return (i, i, i, i, i, t.UniTuple(t.uint32, 20), f, f, t.UniTuple(f, max(n_params, 1)), t.UniTuple(f, no),
+            t.UniTuple(f, no), t.UniTuple(i, no), i, i, t.UniTuple(f, 2), t.UniTuple(f, 2), t.UniTuple(i, 2), f, i,
+            t.boolean, i, i, arr(f, 2), arr(i, 1), arr(i, 2), arr(d, 2), arr(d, 3),
             arr(i, 2), arr(d, 2), arr(d, 3), arr(i, 1)) + ((i, arr(f, 3)) if record else ())
 
 
@@ -724,8 +741,8 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
     if getattr(cuda, "implementation", "") != "NVIDIA" or simulator_enabled():
         raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
     lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
-    src, _ = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
-                                  cache=False, max_registers=max_registers_from_env(precision), record=record)
+    src, st = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
+                                   cache=False, max_registers=max_registers_from_env(precision), record=record)
     name = f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}"
     module, _ = _kernel_modules.load_source(name, src)
     from numba.cuda import dispatcher
@@ -735,7 +752,8 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
     current = dispatcher.get_current_device
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=tuple(cc))
     try:
-        ptx, _ = cuda.compile_ptx(module.advance.py_func, kernel_signature(precision, record), cc=cc)
+        signature = kernel_signature(precision, record, len(st.params), len(observables))
+        ptx, _ = cuda.compile_ptx(module.advance.py_func, signature, cc=cc)
     finally:
         dispatcher.get_current_device = current
     return ptx

@@ -42,89 +42,118 @@ def _philox_round(c0, c1, c2, c3, k0, k1):
     return (p1 >> _S32) ^ c1 ^ k0, p1 & _MASK, (p0 >> _S32) ^ c3 ^ k1, p0 & _MASK
 
 
+def round_keys(k0, k1) -> tuple:
+    """The ten round keys of Philox-4x32-10 under the key (k0, k1), flat: (k0, k1, k0 + W0, k1 + W1, ...) mod 2**32.
+
+    The device kernel takes them as launch arguments, which the GPU reads from its constant bank: computed in the
+    kernel, they were hoisted out of the step loop and held 20 registers (or spilled, under a register cap).
+    """
+    out = []
+    for _ in range(10):  # uint32, so that the device knows their upper words are zero
+        out += [np.uint32(k0), np.uint32(k1)]
+        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
+    return tuple(out)
+
+
 def _make_philox(rnd):
-    def philox4x32_10(c0, c1, c2, c3, k0, k1):
-        # ten rounds written out (a loop was not unrolled by NVVM), the key bumped between rounds
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, k0, k1)
-        k0, k1 = (k0 + _W0) & _MASK, (k1 + _W1) & _MASK
-        return rnd(c0, c1, c2, c3, k0, k1)
+    def philox4x32_10(c0, c1, c2, c3, rk):
+        # ten rounds written out (a loop was not unrolled by NVVM); rk: round_keys(k0, k1)
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[0], rk[1])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[2], rk[3])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[4], rk[5])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[6], rk[7])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[8], rk[9])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[10], rk[11])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[12], rk[13])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[14], rk[15])
+        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[16], rk[17])
+        return rnd(c0, c1, c2, c3, rk[18], rk[19])
 
     return philox4x32_10
 
 
-philox4x32_10 = _make_philox(_philox_round)
-philox4x32_10.__doc__ = """Philox-4x32-10 of the counter (c0, c1, c2, c3) under the key (k0, k1), words below 2**32.
-
-Examples
---------
->>> z = np.uint64(0)
->>> [hex(int(w)) for w in philox4x32_10(z, z, z, z, z, z)]  # Random123 known-answer vector
-['0x6627e8d5', '0xe169c58d', '0xbc57ac4c', '0x9b00dbd8']
-"""
+_philox_keyed = _make_philox(_philox_round)
 
 
-def _make_normal_pair(philox, single: bool):
-    """Box-Muller on one Philox call, written once for the host (tests) and the device (``philox`` jitted)."""
+def philox4x32_10(c0, c1, c2, c3, k0, k1):
+    """Philox-4x32-10 of the counter (c0, c1, c2, c3) under the key (k0, k1), words below 2**32.
+
+    Examples
+    --------
+    >>> z = np.uint64(0)
+    >>> [hex(int(w)) for w in philox4x32_10(z, z, z, z, z, z)]  # Random123 known-answer vector
+    ['0x6627e8d5', '0xe169c58d', '0xbc57ac4c', '0x9b00dbd8']
+    """
+    return _philox_keyed(c0, c1, c2, c3, round_keys(k0, k1))
+
+
+
+
+def _sincos_2pi(u):
+    # sin and cos of 2 pi u on the host (and on the simulator, which has no libdevice)
+    t = _TWO_PI * u
+    return math.sin(t), math.cos(t)
+
+
+def _sincos_2pi_f32(u):
+    t = _TWO_PI_F * u
+    return math.sin(t), math.cos(t)
+
+
+def _make_normal_pair(philox, single: bool, sincos):
+    """Box-Muller on one Philox call, written once for the host (tests) and the device (``philox`` jitted);
+    ``sincos(u)``: sin and cos of 2 pi u."""
     if single:
-        def normal_pair(k0, k1, path, pair):
+        def normal_pair(rk, path, pair):
             pr = np.uint64(pair)
             pa = np.uint64(path)
-            a, b, c, d = philox(pr & _MASK, pr >> _S32, pa & _MASK, pa >> _S32, k0, k1)
+            a, b, c, d = philox(pr & _MASK, pr >> _S32, pa & _MASK, pa >> _S32, rk)
             u1 = np.float32(a + _S1) * _U32F
             u2 = np.float32(c) * _U32F
             r = math.sqrt(_M2_F * math.log(u1))
-            t = _TWO_PI_F * u2
-            return r * math.cos(t), r * math.sin(t)
+            s, co = sincos(u2)
+            return r * co, r * s
     else:
-        def normal_pair(k0, k1, path, pair):
+        def normal_pair(rk, path, pair):
             pr = np.uint64(pair)
             pa = np.uint64(path)
-            a, b, c, d = philox(pr & _MASK, pr >> _S32, pa & _MASK, pa >> _S32, k0, k1)
+            a, b, c, d = philox(pr & _MASK, pr >> _S32, pa & _MASK, pa >> _S32, rk)
             u1 = np.float64((a >> _S5) * _T26 + (b >> _S6) + _S1) * _U53
             u2 = np.float64((c >> _S5) * _T26 + (d >> _S6)) * _U53
             r = math.sqrt(-2.0 * math.log(u1))
-            t = _TWO_PI * u2
-            return r * math.cos(t), r * math.sin(t)
+            s, co = sincos(u2)
+            return r * co, r * s
     return normal_pair
 
 
-normal_pair_f64 = _make_normal_pair(philox4x32_10, single=False)
-normal_pair_f64.__doc__ = """The two standard normals (double) of steps ``2 * pair`` and ``2 * pair + 1`` of a path.
+_normal_pair_f64 = _make_normal_pair(_philox_keyed, False, _sincos_2pi)
+_normal_pair_f32 = _make_normal_pair(_philox_keyed, True, _sincos_2pi_f32)
 
-Uniforms have 53 bits; the first lies in (0, 1] so that the logarithm is finite (largest |z| about 8.6).
 
-Examples
---------
->>> z0, z1 = normal_pair_f64(np.uint64(1), np.uint64(2), 0, 0)
->>> bool(abs(z0) < 9 and abs(z1) < 9)
-True
-"""
+def normal_pair_f64(k0, k1, path, pair):
+    """The two standard normals (double) of steps ``2 * pair`` and ``2 * pair + 1`` of a path.
 
-normal_pair_f32 = _make_normal_pair(philox4x32_10, single=True)
-normal_pair_f32.__doc__ = """As :func:`normal_pair_f64` in single precision: 32-bit uniforms (largest |z| about 6.7).
+    Uniforms have 53 bits; the first lies in (0, 1] so that the logarithm is finite (largest |z| about 8.6).
 
-Examples
---------
->>> z0, z1 = normal_pair_f32(np.uint64(1), np.uint64(2), 0, 0)
->>> bool(abs(z0) < 7 and abs(z1) < 7)
-True
-"""
+    Examples
+    --------
+    >>> z0, z1 = normal_pair_f64(np.uint64(1), np.uint64(2), 0, 0)
+    >>> bool(abs(z0) < 9 and abs(z1) < 9)
+    True
+    """
+    return _normal_pair_f64(round_keys(k0, k1), path, pair)
+
+
+def normal_pair_f32(k0, k1, path, pair):
+    """As :func:`normal_pair_f64` in single precision: 32-bit uniforms (largest |z| about 6.7).
+
+    Examples
+    --------
+    >>> z0, z1 = normal_pair_f32(np.uint64(1), np.uint64(2), 0, 0)
+    >>> bool(abs(z0) < 7 and abs(z1) < 7)
+    True
+    """
+    return _normal_pair_f32(round_keys(k0, k1), path, pair)
 
 
 def seed_key(seed: int) -> tuple[np.uint64, np.uint64]:
@@ -143,14 +172,30 @@ _DEVICE: dict = {}
 
 
 def device_normal_pair(precision: str):
-    """The CUDA device function ``normal_pair(k0, k1, path, pair)`` for ``precision`` ('f64' or 'f32').
+    """The CUDA device function ``normal_pair(rk, path, pair)`` (``rk``: :func:`round_keys`) for ``precision``
+    ('f64' or 'f32').
 
     Built on first use, so that importing this module (doctests, CI without numba-cuda) needs no ``numba.cuda``.
     """
     if precision not in _DEVICE:
         from numba import cuda
+        from numba.core import config
 
-        rnd = cuda.jit(device=True, inline=True)(_philox_round)
-        philox = cuda.jit(device=True, inline=True)(_make_philox(rnd))
-        _DEVICE[precision] = cuda.jit(device=True, inline=True)(_make_normal_pair(philox, precision == "f32"))
+        single = precision == "f32"
+        device = cuda.jit(device=True, inline=True)
+        rnd = device(_philox_round)
+        philox = device(_make_philox(rnd))
+        if config.ENABLE_CUDASIM:  # no libdevice there: the host's arithmetic
+            sincos = device(_sincos_2pi_f32 if single else _sincos_2pi)
+        else:  # sincospi: no range reduction of 2 pi u, both values at once (the same to rounding as the host's)
+            from numba.cuda import libdevice
+
+            sincospi = libdevice.sincospif if single else libdevice.sincospi
+            two = np.float32(2.0) if single else 2.0
+
+            def sincos_2pi(u):
+                return sincospi(two * u)
+
+            sincos = device(sincos_2pi)
+        _DEVICE[precision] = device(_make_normal_pair(philox, single, sincos))
     return _DEVICE[precision]
