@@ -127,6 +127,33 @@ def test_f32_module_types_every_float_literal():
     assert bare == [] and "float(" not in src.replace("_fty(", "")
 
 
+def test_loop_invariants_are_evaluated_on_the_host_and_refused_when_undefined():
+    """The device kernel takes the loop invariants of the model's expressions as a launch argument, evaluated once
+    on the host by the module's ``hoisted_values``: for Example 1 they are -a, -b, -c, sqrt(2 D), -delta, a/2 and
+    b/4 (its drift, noise, guard and energy), in the order the kernel unpacks them; an undefined one (D < 0) is a
+    one-line ParameterError, not a NaN on the device."""
+    from types import SimpleNamespace
+
+    from models import DuffingImpact, Ma
+
+    automaton = DuffingImpact(restitution=Ma(vc=0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0).to_automaton()
+    lay = _auto_cuda.layout(1, 22, 2, 100, (1, 1), 0)
+    src, st = _auto_cuda.generate_cuda_source(automaton, "symplectic", {"H": automaton.observables["H"]}, lay=lay)
+    namespace = {"math": math}
+    exec(src[src.index("def hoisted_values(p, dt):"):], namespace)
+    module = SimpleNamespace(hoisted_values=namespace["hoisted_values"])
+    p = [automaton.parameters[name] for name in st.params]
+    assert st.params == ("a", "b", "c", "D", "delta")
+    values = _auto_cuda.hoisted_values(module, p, 1e-3, np.float64)
+    assert values == (-1.0, -0.2, -0.025, math.sqrt(2 * 0.05), -1.0, 0.5, 0.05)
+    unpacked = re.findall(r"^    (_inv\d+) = hv\[(\d+)\]$", src, re.M)
+    assert [(name, int(k)) for name, k in unpacked] == [(f"_inv{k}", k) for k in range(7)]
+    assert f"N_HOISTED = {len(values)} " in src
+    assert _auto_cuda.hoisted_values(module, p, 1e-3, np.float32)[3] == np.float32(math.sqrt(0.1))
+    with pytest.raises(ParameterError, match="undefined"):
+        _auto_cuda.hoisted_values(module, [1.0, 0.2, 0.025, -0.05, 1.0], 1e-3, np.float64)
+
+
 def test_layout_keeps_the_speeds_shared_and_refuses_what_cannot_be():
     lay = _auto_cuda.layout(3, 402, 2, 100, (1, 1), 20)  # 20 phase sections of 3 x 402 cells: beyond 48 KiB
     assert lay["shared"] == lay["p_off"] < lay["cells"]

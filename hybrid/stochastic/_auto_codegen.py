@@ -172,6 +172,7 @@ class _Names:
         self.invariant = {sp.Symbol(f"_p{j}") for j in range(self.np)} | {sp.Symbol(n) for n in ("dt", "sdt", "hdt")}
         self.hoisted: dict = {}
         self.preamble: list = []  # code run once before the loops (before the hoisted names: they may use it)
+        self.preamble_names: list = []  # the names the preamble binds for the loops
 
     def hoist(self, e):
         """``e`` (in code names) with each largest sub-expression of the loop invariants replaced by a name
@@ -200,6 +201,18 @@ class _Names:
     def hoisted_lines(self) -> list[str]:
         return self.preamble + [f"{name} = {self.printer.doprint(e)}" for e, name in self.hoisted.items()]
 
+    def hoisted_names(self) -> list[str]:
+        """The names :meth:`hoisted_lines` binds for the loops (the preamble's temporaries left out)."""
+        return self.preamble_names + [str(name) for name in self.hoisted.values()]
+
+    def hoisted_function(self) -> str:
+        """A plain Python function ``hoisted_values(p, dt)`` of the module: the values of :meth:`hoisted_names`,
+        evaluated once on the host (the CUDA kernel takes them as launch arguments, in its constant bank)."""
+        names = self.hoisted_names()
+        body = (["sdt = math.sqrt(dt)", "hdt = 0.5 * dt"] + [f"_p{j} = p[{j}]" for j in range(self.np)]
+                + self.hoisted_lines() + [f"return ({''.join(n + ', ' for n in names)})"])
+        return "def hoisted_values(p, dt):\n" + textwrap.indent("\n".join(body), "    ") + "\n"
+
     def ou_factors(self, lines: list, tag: str, c) -> None:
         """Code for ``_oa{tag}`` = exp(-c dt) and ``_oc{tag}`` = sqrt((1 - exp(-2 c dt)) / (2 c dt)), the exact
         Ornstein-Uhlenbeck step y -> _oa y + _oc (G dW) with damping rate ``c`` (in code names; c dt -> 0 safe).
@@ -213,6 +226,7 @@ class _Names:
                 f"    _oc{tag} = math.sqrt(-math.expm1(-2.0 * _kd) / (2.0 * _kd))"]
         if c.free_symbols <= self.invariant:
             self.preamble.extend(code)
+            self.preamble_names += [f"_oa{tag}", f"_oc{tag}"]
             self.invariant |= {sp.Symbol(f"_oa{tag}"), sp.Symbol(f"_oc{tag}")}
         else:
             lines.extend(code)
@@ -578,6 +592,12 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
         lane_step=_LANE_STEP.format(**step),
+        # the CUDA kernel's unpacking: the loop invariants come evaluated, as the launch argument hv
+        unpack_args=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))]
+                                  + [f"{name} = hv[{k}]" for k, name in enumerate(names.hoisted_names())] + [
+            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
+            for o in range(len(obs))]) or "pass", " " * 4),
+        hoisted_function=names.hoisted_function(), n_hoisted=len(names.hoisted_names()),
         unpack_step=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines())
                         or "pass", " " * 4),
         lane_to_out=ind("\n".join(f"out[_g + _l, (step + 1) // every, {i}] = _L{i}[_l]" for i in range(n)),

@@ -114,6 +114,7 @@ J_OFF = {j_off}  # the joint histogram (y bin, x bin),
 NX = {nx}
 P_OFF = {p_off}  # the phase sections (section, observable, bin)
 CELLS = {cells}
+N_HOISTED = {n_hoisted}  # loop invariants of the model's expressions: the launch argument hv (hoisted_values)
 '''
 
 _KERNEL = '''\
@@ -127,7 +128,7 @@ def count(sh, gh, i):
 
 
 @cuda.jit({jit_options})
-def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, obs_lo, obs_scale, obs_bins, jx, jy, j_lo, j_scale,
+def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, hv, obs_lo, obs_scale, obs_bins, jx, jy, j_lo, j_scale,
             j_bins, v_scale, v_bins, track, n_phase, phase_steps, XS, MS, CNT, SM, PSM, IWS, FWS, elogs, gh):
     """Steps [n0, n1) of paths 0 .. npath-1, one thread each; every path's row in XS .. FWS in and out."""
     sh = cuda.shared.array(SH, int32)
@@ -139,7 +140,7 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, obs_lo, obs_scale, obs
     ip = cuda.grid(1)
     sdt = math.sqrt(dt)
     hdt = _fty(0.5) * dt
-{unpack}
+{unpack_args}
     if ip < npath:  # no early return: every thread reaches the barriers
         x = cuda.local.array(N, _fty)
         ws = cuda.local.array(WORK, _fty)
@@ -213,7 +214,9 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, obs_lo, obs_scale, obs
     for _i in range(tid, SH, nthr):  # the block's shared cells into the global ones, once per launch
         if sh[_i] != 0:
             cuda.atomic.add(gh, _i, sh[_i])
-'''
+
+
+{hoisted_function}'''
 
 _CUDA_TEMPLATE = (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPLATE_EVENTS
                   + _auto_codegen._TEMPLATE_OUTSIDE + _KERNEL)
@@ -432,6 +435,7 @@ class CudaRun:
         # constant bank (arrays are loaded once into registers that the whole step loop holds); one unused value
         # when a model has no parameters
         params = tuple(ft(v) for v in a["p"]) or (ft(0.0),)
+        hoisted = hoisted_values(self.module, a["p"], a["dt"], ft)
 
         def floats(v):
             return tuple(ft(w) for w in v)
@@ -439,9 +443,9 @@ class CudaRun:
         def ints(v):
             return tuple(np.int64(w) for w in v)
 
-        self.scalars = (ft(a["dt"]), ft(0.0), params, floats(a["obs_lo"]), floats(a["obs_scale"]), ints(a["obs_bins"]),
-                        np.int64(a["jx"]), np.int64(a["jy"]), floats(a["j_lo"]), floats(a["j_scale"]),
-                        ints(a["j_bins"]), ft(a["v_scale"]), np.int64(a["v_bins"]))
+        self.scalars = (ft(a["dt"]), ft(0.0), params, hoisted, floats(a["obs_lo"]), floats(a["obs_scale"]),
+                        ints(a["obs_bins"]), np.int64(a["jx"]), np.int64(a["jy"]), floats(a["j_lo"]),
+                        floats(a["j_scale"]), ints(a["j_bins"]), ft(a["v_scale"]), np.int64(a["v_bins"]))
         self._check_memory(int(job.npaths.sum()))  # before any compile or launch
 
     def fresh(self, paths: int) -> dict:
@@ -708,10 +712,30 @@ def kernel_resources(settings: dict) -> dict:
             "blocks_per_sm": blocks, "occupancy": occupancy}
 
 
-def kernel_signature(precision: str = "f64", record: bool = False, n_params: int = 1, n_obs: int = 1) -> tuple:
+def hoisted_values(module, p, dt, ftype) -> tuple:
+    """The loop invariants of the model's expressions (``module.hoisted_values``), evaluated on the host and given
+    to the kernel as a launch argument (a tuple of ``ftype``); one unused value where there are none.
+
+    The host evaluates them in double precision, except where the module types a literal as float32 (f32); the
+    device no longer computes them, so they are the CPU kernel's values rounded to the kernel's type.
+
+    A value the parameters make undefined (a square root of a negative number, an overflow) is a one-line
+    :class:`~hybrid.errors.ParameterError`, as the host cannot hand the device a NaN it would have made itself.
+    """
+    try:
+        with np.errstate(all="ignore"):
+            values = module.hoisted_values(tuple(float(v) for v in p), float(dt))
+    except (ValueError, OverflowError, ZeroDivisionError) as exc:
+        raise ParameterError(f"the model's parameters {tuple(float(v) for v in p)} make a loop invariant of its "
+                             f"expressions undefined ({type(exc).__name__}: {exc})") from None
+    return tuple(ftype(v) for v in values) or (ftype(0.0),)
+
+
+def kernel_signature(precision: str = "f64", record: bool = False, n_params: int = 1, n_obs: int = 1,
+                     n_hoisted: int = 1) -> tuple:
     """numba types of the arguments of ``advance``, in the order :meth:`CudaRun.advance` passes them (``record``:
     the recording variant's, as :meth:`CudaRecorder._launch` passes them), for a model of ``n_params``
-    parameters and ``n_obs`` observables."""
+    parameters, ``n_obs`` observables and ``n_hoisted`` loop invariants (``N_HOISTED`` of its module)."""
     from numba import types as t
 
     f = t.float32 if precision == "f32" else t.float64
@@ -721,7 +745,8 @@ def kernel_signature(precision: str = "f64", record: bool = False, n_params: int
         return t.Array(dtype, ndim, "C")
 
     no = max(n_obs, 1)
-    return (i, i, i, i, i, t.UniTuple(t.uint32, 20), f, f, t.UniTuple(f, max(n_params, 1)), t.UniTuple(f, no),
+    return (i, i, i, i, i, t.UniTuple(t.uint32, 20), f, f, t.UniTuple(f, max(n_params, 1)),
+            t.UniTuple(f, max(n_hoisted, 1)), t.UniTuple(f, no),
             t.UniTuple(f, no), t.UniTuple(i, no), i, i, t.UniTuple(f, 2), t.UniTuple(f, 2), t.UniTuple(i, 2), f, i,
             t.boolean, i, i, arr(f, 2), arr(i, 1), arr(i, 2), arr(d, 2), arr(d, 3),
             arr(i, 2), arr(d, 2), arr(d, 3), arr(i, 1)) + ((i, arr(f, 3)) if record else ())
@@ -752,7 +777,7 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
     current = dispatcher.get_current_device
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=tuple(cc))
     try:
-        signature = kernel_signature(precision, record, len(st.params), len(observables))
+        signature = kernel_signature(precision, record, len(st.params), len(observables), module.N_HOISTED)
         ptx, _ = cuda.compile_ptx(module.advance.py_func, signature, cc=cc)
     finally:
         dispatcher.get_current_device = current
