@@ -9,7 +9,10 @@ their decorators turned into ``cuda.jit(device=True)``. Only the loop around the
   the Philox-4x32-10 draw at counter (q // 2, i) under the seed's key, by Box-Muller
   (:mod:`hybrid.stochastic._cuda_rng`). Nothing depends on the block size, the grid or where a launch starts, so
   every number is bitwise the same for any launch configuration and across a checkpoint and resume; and the host
-  can compute the same normals (the tests drive the CPU kernel with them and find the same paths).
+  can compute the same normals, to rounding (the tests drive the CPU kernel with them and find the same paths).
+* **Launch arguments.** The Philox round keys, the model's parameters, the loop invariants of its expressions
+  (evaluated on the host by the module's ``hoisted_values``) and the histograms' ranges are tuple arguments, read
+  from the constant bank: as arrays they held registers across the whole step loop, or spilled.
 * **Histograms.** Each block counts into one flat ``cuda.shared.array`` of int32 cells with shared atomics (the
   speeds at the firings, the observables, the joint histogram, the phase sections, in that order, as far as they
   fit in 48 KiB; the rest goes straight to global memory) and adds it once per launch into the global int64 cells.
@@ -43,7 +46,7 @@ from hybrid.errors import CudaUnavailableError, ModelError, ParameterError
 
 from . import _auto_codegen, _auto_exec, _cuda_rng, _kernel_modules
 
-RNG = "philox4x32-10 box-muller, counter (step*M+k)//2, path"
+RNG = "philox4x32-10 box-muller (angle by sincospi on the device), counter (step*M+k)//2, path"
 PRECISIONS = ("f64", "f32")
 SHARED_CELLS = 12 * 1024
 """int32 cells of a block's shared histograms (48 KiB, the static shared memory of one block)."""
