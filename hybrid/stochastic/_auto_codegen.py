@@ -595,8 +595,8 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         # the CUDA kernel's unpacking: the loop invariants come evaluated, as the launch argument hv
         unpack_args=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))]
                                   + [f"{name} = hv[{k}]" for k, name in enumerate(names.hoisted_names())] + [
-            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
-            for o in range(len(obs))]) or "pass", " " * 4),
+            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_nbf{o} = _fty(_nb{o})\n"
+            f"_sum{o} = 0.0" for o in range(len(obs))]) or "pass", " " * 4),
         hoisted_function=names.hoisted_function(), n_hoisted=len(names.hoisted_names()),
         unpack_step=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines())
                         or "pass", " " * 4),

@@ -190,7 +190,7 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, hv, obs_lo, obs_scale,
                         b = (v - obs_lo[o]) * obs_scale[o]
                         if b < 0.0:
                             cell = 0
-                        elif b >= obs_bins[o]:
+                        elif b >= _fty(obs_bins[o]):
                             cell = obs_bins[o] + 1
                         else:
                             cell = int(b) + 1
@@ -200,7 +200,7 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, hv, obs_lo, obs_scale,
                 _nsamp += 1
 ''' + _auto_codegen.SAMPLE_CHECKS + '''                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
                     by = (ob[jy] - j_lo[1]) * j_scale[1]
-                    if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
+                    if bx >= 0.0 and bx < _fty(j_bins[0]) and by >= 0.0 and by < _fty(j_bins[1]):
                         count(sh, gh, J_OFF + int(by) * NX + int(bx))
                     else:
                         counts[4] += 1
@@ -358,6 +358,9 @@ def generate_cuda_source(automaton, scheme: str, observables: dict, convention: 
                                             phases=phases, template=_CUDA_TEMPLATE_RECORD if record else _CUDA_TEMPLATE,
                                             fields=fields)
     src = _to_device(src)
+    # the bin coordinate against the bin count in the kernel's float type: float32 < int64 compares in double,
+    # which consumer GPUs run at a small fraction of the single-precision rate (the count is exact in either)
+    src = re.sub(r"\b_b < _nb(\d+):", r"_b < _nbf\1:", src)
     if precision == "f32":
         tree = _Float32().visit(ast.parse(src))
         src = "\n".join(src.splitlines()[:2]) + "\n" + ast.unparse(ast.fix_missing_locations(tree)) + "\n"
