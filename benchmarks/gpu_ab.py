@@ -1,18 +1,19 @@
 """GPU path-steps/s of the automaton kernel, this tree against a git revision, in interleaved processes.
 
-    python benchmarks/gpu_ab.py --baseline 716ff86              # Example 1 and the impact pair, 3 rounds
+    python benchmarks/gpu_ab.py --baseline 716ff86              # Example 1 and the impact pair, 4 rounds
     python benchmarks/gpu_ab.py --baseline main --rounds 4 --models "Example 1" --precision f32
     NUMBA_ENABLE_CUDASIM=1 python benchmarks/gpu_ab.py --baseline main --paths 32 --steps 20   # a check, not a timing
 
-Each round runs one process per tree (the order alternates between rounds, because the first process after a
-pause was seen to run slower); each process compiles (or loads) the kernels of the models named, then times
-``--timings`` runs of ``--paths`` x ``--steps`` steps (default 2**20 x 20,000, dt = 1e-3, from rest, the H
-histogram filled every step; compilation excluded) through ``simulate_automaton(..., scheduler="cuda")``. Printed:
-each process's timings, registers per thread, local memory and occupancy, E[H] (the same seed: the two trees'
-means should agree to the digits their normals share), and per model the median over rounds of the paired ratio
-this tree / baseline, whose spread is the honest error bar. The processes of one round run on the same warm device,
-back to back: on the H100s lent to this project the same code ran up to a third faster on one machine than on another,
-so only ratios measured in one run compare.
+Each round runs one process per tree. The order alternates between rounds, because the first process after a
+pause was seen to run slower, so an even number of rounds lets each tree go first as often. Each process compiles
+(or loads) the kernels of the models named, then times ``--timings`` runs of ``--paths`` x ``--steps`` steps
+(default 2**20 x 20,000, dt = 1e-3, from rest, the H histogram filled every step; compilation excluded; a model
+with phase sections runs at least one period) through ``simulate_automaton(..., scheduler="cuda")``. Printed: each
+process's timings, registers per thread, local memory and occupancy, E[H] (the same seed: the two trees' means
+should agree to the digits their normals share), and per model the median over rounds of the paired ratio this
+tree / baseline, whose spread is the honest error bar. The processes of one round run on the same warm device,
+back to back: on the H100s lent to this project the same code ran up to a fifth faster on one machine than on
+another, so only ratios measured in one run compare.
 
 The models are those of ``gpu_throughput.py --automata`` (issue 22, item 2).
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -51,14 +53,17 @@ def worker(args) -> None:
                                       check_dt=False, scheduler="cuda", threads_per_block=128,
                                       precision=args.precision, **kw)
 
-    for name in args.models.split(","):
+    for name in args.models.split(";"):
+        period = table[name][2].get("period")
+        n_min = math.ceil(period / DT) + 1 if period else 10  # a model with phase sections: at least one period
+        steps = max(args.steps, n_min)
         t0 = time.perf_counter()
-        ens(name, 128, 10)  # compile or load
+        ens(name, 128, n_min)  # compile or load
         first = time.perf_counter() - t0
         rates = []
         for _ in range(args.timings):
-            g = ens(name, args.paths, args.steps)
-            rates.append(args.paths * args.steps / g.settings["device_seconds"])
+            g = ens(name, args.paths, steps)
+            rates.append(args.paths * steps / g.settings["device_seconds"])
         row = {"model": name, "rates": rates, "first_call_s": first, "mean": str(g.mean(g.names[0]))}
         if not _auto_cuda.simulator_enabled():
             row.update(_auto_cuda.kernel_resources(g.settings))
@@ -86,9 +91,10 @@ def _show(label: str, row: dict) -> None:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
     ap.add_argument("--baseline", metavar="REF", help="git revision to compare with (its `git archive`)")
-    ap.add_argument("--models", default="Example 1,impact pair", help="comma-separated (gpu_throughput's names)")
+    ap.add_argument("--models", default="Example 1;impact pair",
+                    help="separated by ';' (the names of gpu_throughput.py's automaton_models)")
     ap.add_argument("--precision", default="f64", choices=("f64", "f32"))
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=4, help="an even number lets each tree go first equally often")
     ap.add_argument("--timings", type=int, default=4, help="timed runs per process and model")
     ap.add_argument("--paths", type=int, default=2**20)
     ap.add_argument("--steps", type=int, default=20_000)
@@ -117,7 +123,7 @@ def main(argv=None) -> dict:
                     _show(label, row)
             out["rounds"].append(rows)
     print(f"this tree / {args.baseline}, paired medians of each round (spread over rounds):")
-    for name in args.models.split(","):
+    for name in args.models.split(";"):
         ratios = [statistics.median(r["this tree"][name]["rates"]) / statistics.median(r[args.baseline][name]["rates"])
                   for r in out["rounds"]]
         print(f"  {name:<24} {statistics.median(ratios):.2f}  (rounds: {', '.join(f'{x:.2f}' for x in ratios)})")

@@ -127,31 +127,61 @@ def test_f32_module_types_every_float_literal():
     assert bare == [] and "float(" not in src.replace("_fty(", "")
 
 
+def _host_function(src: str, **names):
+    """The device module's plain-Python ``hoisted_values`` with ``HOISTED_NAMES``, without importing numba.cuda."""
+    import ast
+    from types import SimpleNamespace
+
+    namespace = {"math": math, **names}
+    exec(src[src.index("def hoisted_values(p, dt):"):], namespace)
+    hoisted = ast.literal_eval(re.search(r"^HOISTED_NAMES = (\([^)]*\))", src, re.M).group(1))
+    return SimpleNamespace(hoisted_values=namespace["hoisted_values"], HOISTED_NAMES=hoisted)
+
+
 def test_loop_invariants_are_evaluated_on_the_host_and_refused_when_undefined():
     """The device kernel takes the loop invariants of the model's expressions as a launch argument, evaluated once
     on the host by the module's ``hoisted_values``: for Example 1 they are -a, -b, -c, sqrt(2 D), -delta, a/2 and
-    b/4 (its drift, noise, guard and energy), in the order the kernel unpacks them; an undefined one (D < 0) is a
-    one-line ParameterError, not a NaN on the device."""
+    b/4 (its drift, noise, guard and energy), in the order the kernel unpacks them; with IEEE semantics, as the
+    device had them (1 / (1 + exp(800)) is 0, not an overflow); an invariant that is NaN (D < 0) is a one-line
+    ParameterError, not a NaN on the device."""
     from types import SimpleNamespace
 
     from models import DuffingImpact, Ma
 
     automaton = DuffingImpact(restitution=Ma(vc=0.4), a=1.0, b=0.2, c=0.025, D=0.05, delta=1.0).to_automaton()
     lay = _auto_cuda.layout(1, 22, 2, 100, (1, 1), 0)
-    src, st = _auto_cuda.generate_cuda_source(automaton, "symplectic", {"H": automaton.observables["H"]}, lay=lay)
-    namespace = {"math": math}
-    exec(src[src.index("def hoisted_values(p, dt):"):], namespace)
-    module = SimpleNamespace(hoisted_values=namespace["hoisted_values"])
+    obs = {"H": automaton.observables["H"]}
+    src, st = _auto_cuda.generate_cuda_source(automaton, "symplectic", obs, lay=lay)
+    module = _host_function(src)
     p = [automaton.parameters[name] for name in st.params]
     assert st.params == ("a", "b", "c", "D", "delta")
     values = _auto_cuda.hoisted_values(module, p, 1e-3, np.float64)
     assert values == (-1.0, -0.2, -0.025, math.sqrt(2 * 0.05), -1.0, 0.5, 0.05)
-    unpacked = re.findall(r"^    (_inv\d+) = hv\[(\d+)\]$", src, re.M)
-    assert [(name, int(k)) for name, k in unpacked] == [(f"_inv{k}", k) for k in range(7)]
-    assert f"N_HOISTED = {len(values)} " in src
-    assert _auto_cuda.hoisted_values(module, p, 1e-3, np.float32)[3] == np.float32(math.sqrt(0.1))
-    with pytest.raises(ParameterError, match="undefined"):
+    unpacked = re.findall(r"^    (_\w+) = hv\[(\d+)\]$", src, re.M)
+    assert [(name, int(k)) for name, k in unpacked] == [(name, k) for k, name in enumerate(module.HOISTED_NAMES)]
+    assert module.HOISTED_NAMES == tuple(f"_inv{k}" for k in range(7))
+    with pytest.raises(ParameterError, match="_inv3 of its expressions NaN"):
         _auto_cuda.hoisted_values(module, [1.0, 0.2, 0.025, -0.05, 1.0], 1e-3, np.float64)
+    # the f32 module's own function (its literals typed float32), rounded to float32
+    src32, _ = _auto_cuda.generate_cuda_source(automaton, "symplectic", obs, lay=lay, precision="f32")
+    values32 = _auto_cuda.hoisted_values(_host_function(src32, _fty=np.float32), p, 1e-3, np.float32)
+    assert values32 == tuple(np.float32(v) for v in values)
+    # the impact pair under baoab: the exact OU factors of its damping come first, in the kernel's order too
+    pair = impact_pair()
+    src_pair, st_pair = _auto_cuda.generate_cuda_source(pair, "baoab", dict(pair.observables), lay=lay)
+    pair_module = _host_function(src_pair)
+    assert pair_module.HOISTED_NAMES[:2] == ("_oa0_2", "_oc0_2")
+    unpacked = re.findall(r"^    (_\w+) = hv\[(\d+)\]$", src_pair, re.M)
+    assert [(name, int(k)) for name, k in unpacked] == [(n, k) for k, n in enumerate(pair_module.HOISTED_NAMES)]
+    pv = _auto_cuda.hoisted_values(pair_module, [pair.parameters[n] for n in st_pair.params], 1e-3, np.float64)
+    assert all(np.isfinite(pv)) and 0.0 < pv[0] < 1.0  # _oa = exp(-c dt)
+    # IEEE semantics: an overflowing intermediate is inf, as on the device; a NaN is refused
+    namespace = {"math": math}
+    exec("def hoisted_values(p, dt):\n    return (1.0 / (1.0 + math.exp(p[0])), p[1] ** (1 / 3))\n", namespace)
+    fake = SimpleNamespace(hoisted_values=namespace["hoisted_values"], HOISTED_NAMES=("_inv0", "_inv1"))
+    assert _auto_cuda.hoisted_values(fake, [800.0, 8.0], 1e-3, np.float64) == (0.0, 2.0)
+    with pytest.raises(ParameterError, match="_inv1 of its expressions NaN"):
+        _auto_cuda.hoisted_values(fake, [800.0, -8.0], 1e-3, np.float64)
 
 
 def test_layout_keeps_the_speeds_shared_and_refuses_what_cannot_be():

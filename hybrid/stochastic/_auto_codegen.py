@@ -597,7 +597,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
                                   + [f"{name} = hv[{k}]" for k, name in enumerate(names.hoisted_names())] + [
             f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_nbf{o} = _fty(_nb{o})\n"
             f"_sum{o} = 0.0" for o in range(len(obs))]) or "pass", " " * 4),
-        hoisted_function=names.hoisted_function(), n_hoisted=len(names.hoisted_names()),
+        hoisted_function=names.hoisted_function(), hoisted_names=tuple(names.hoisted_names()),
         unpack_step=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines())
                         or "pass", " " * 4),
         lane_to_out=ind("\n".join(f"out[_g + _l, (step + 1) // every, {i}] = _L{i}[_l]" for i in range(n)),

@@ -35,6 +35,7 @@ what to do in one line.
 from __future__ import annotations
 
 import ast
+import math
 import re
 import time
 import types
@@ -117,7 +118,8 @@ J_OFF = {j_off}  # the joint histogram (y bin, x bin),
 NX = {nx}
 P_OFF = {p_off}  # the phase sections (section, observable, bin)
 CELLS = {cells}
-N_HOISTED = {n_hoisted}  # loop invariants of the model's expressions: the launch argument hv (hoisted_values)
+HOISTED_NAMES = {hoisted_names}  # loop invariants of the model's expressions: the launch argument hv
+N_HOISTED = len(HOISTED_NAMES)  # (hoisted_values)
 '''
 
 _KERNEL = '''\
@@ -718,22 +720,42 @@ def kernel_resources(settings: dict) -> dict:
             "blocks_per_sm": blocks, "occupancy": occupancy}
 
 
+class _IeeeMath:
+    """``math`` as the device computes it: numpy's functions, which give inf and NaN where Python's raise (an
+    overflow of exp, a logarithm of 0, a square root of a negative number); those numpy lacks stay Python's."""
+
+    def __getattr__(self, name):
+        return getattr(np, name, None) if name != "pow" and hasattr(np, name) else getattr(math, name)
+
+
+_IEEE_MATH = _IeeeMath()
+
+
 def hoisted_values(module, p, dt, ftype) -> tuple:
     """The loop invariants of the model's expressions (``module.hoisted_values``), evaluated on the host and given
     to the kernel as a launch argument (a tuple of ``ftype``); one unused value where there are none.
 
-    The host evaluates them in double precision, except where the module types a literal as float32 (f32); the
-    device no longer computes them, so they are the CPU kernel's values rounded to the kernel's type.
-
-    A value the parameters make undefined (a square root of a negative number, an overflow) is a one-line
-    :class:`~hybrid.errors.ParameterError`, as the host cannot hand the device a NaN it would have made itself.
+    They are evaluated in double precision with IEEE semantics, as the device did before (an intermediate may
+    overflow to inf, as in 1 / (1 + exp(800)) = 0), then rounded to ``ftype``; where an f32 module types a literal
+    as float32 the product is still made in double. An invariant that is NaN (a square root of a negative D, a
+    negative number to a fractional power) is a one-line :class:`~hybrid.errors.ParameterError`: the CPU kernel
+    would run such a model into NaN states.
     """
+    fn = module.hoisted_values
+    ieee = types.FunctionType(fn.__code__, {**fn.__globals__, "math": _IEEE_MATH}, fn.__name__)
+    params = tuple(np.float64(v) for v in p)
     try:
         with np.errstate(all="ignore"):
-            values = module.hoisted_values(tuple(float(v) for v in p), float(dt))
-    except (ValueError, OverflowError, ZeroDivisionError) as exc:
+            values = [np.float64(v) for v in ieee(params, np.float64(dt))]
+    except (ArithmeticError, ValueError, TypeError) as exc:  # a function numpy lacks, on a bad argument
         raise ParameterError(f"the model's parameters {tuple(float(v) for v in p)} make a loop invariant of its "
                              f"expressions undefined ({type(exc).__name__}: {exc})") from None
+    bad = [k for k, v in enumerate(values) if v != v]
+    if bad:
+        raise ParameterError(f"the model's parameters {tuple(float(v) for v in p)} make loop invariant "
+                             f"{module.HOISTED_NAMES[bad[0]]} of its "
+                             "expressions NaN (a square root of a negative number, a negative number to a "
+                             "fractional power, ...)")
     return tuple(ftype(v) for v in values) or (ftype(0.0),)
 
 

@@ -9,7 +9,8 @@ configurations and across a checkpoint and resume.
 Words are held in uint64 variables (values below 2**32) so that the 32 x 32 -> 64 bit products of Philox are plain
 uint64 multiplications, identical under numba-cuda and under its simulator (numpy scalars). The host functions
 here are plain Python (the tests check them against known-answer vectors); :func:`device_normal_pair` compiles the
-very same code for the device.
+same Philox and Box-Muller code for the device, except Box-Muller's angle: libdevice's ``sincospi(2u)`` on the
+device, sin and cos of 2 pi u on the host and the simulator, which agree to rounding.
 """
 
 from __future__ import annotations
@@ -85,8 +86,6 @@ def philox4x32_10(c0, c1, c2, c3, k0, k1):
     ['0x6627e8d5', '0xe169c58d', '0xbc57ac4c', '0x9b00dbd8']
     """
     return _philox_keyed(c0, c1, c2, c3, round_keys(k0, k1))
-
-
 
 
 def _sincos_2pi(u):
