@@ -721,11 +721,23 @@ def kernel_resources(settings: dict) -> dict:
 
 
 class _IeeeMath:
-    """``math`` as the device computes it: numpy's functions, which give inf and NaN where Python's raise (an
-    overflow of exp, a logarithm of 0, a square root of a negative number); those numpy lacks stay Python's."""
+    """``math`` as the device computes it: Python's function (the C library's, as the CPU kernel's), and numpy's
+    where Python's raises instead of giving inf or NaN (an overflow of exp, a logarithm of 0, a square root of a
+    negative number); a function numpy lacks still raises."""
 
     def __getattr__(self, name):
-        return getattr(np, name, None) if name != "pow" and hasattr(np, name) else getattr(math, name)
+        exact = getattr(math, name)
+        ieee = getattr(np, name, None)
+        if not callable(exact) or ieee is None:
+            return exact
+
+        def evaluate(*args):
+            try:
+                return exact(*args)
+            except (OverflowError, ValueError):
+                return ieee(*(np.float64(a) for a in args))
+
+        return evaluate
 
 
 _IEEE_MATH = _IeeeMath()
