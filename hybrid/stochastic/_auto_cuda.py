@@ -658,8 +658,8 @@ DEFAULT_MAX_REGISTERS = {"f64": 96, "f32": 64}
 the compiler's 160 registers and 4.4-4.6e10 capped at 96; the impact pair 2.1e10 with 210 and 2.6-2.7e10 at 96; f32
 Example 1 3.8-4.5e10 with 138 and 4.8-4.9e10 at 64. The spills the caps cause cost less than the occupancy gained.
 With the launch arguments (2026-11-27, first machine, one timing per cap, six at 96): Example 1 3.6e10 uncapped
-(130 registers), 4.3e10 at 128,
-4.6-4.9e10 at 96, 3.8-4.1e10 at 80-64; the impact pair 2.4e10 uncapped, 2.9-3.2e10 at 128-80."""
+(130 registers), 4.3e10 at 128, 4.6-4.9e10 at 96, 3.8-4.1e10 at 80-64; the impact pair 2.4e10 uncapped, 2.9-3.2e10
+at 128-80."""
 
 
 def max_registers_from_env(precision: str = "f64") -> int | None:
