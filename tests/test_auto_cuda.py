@@ -134,8 +134,9 @@ def _host_function(src: str, **names):
 
     namespace = {"math": math, **names}
     exec(src[src.index("def hoisted_values(p, dt):"):], namespace)
-    hoisted = ast.literal_eval(re.search(r"^HOISTED_NAMES = (\([^)]*\))", src, re.M).group(1))
-    return SimpleNamespace(hoisted_values=namespace["hoisted_values"], HOISTED_NAMES=hoisted)
+    names, texts = (ast.literal_eval(re.search(rf"^{key} = (\(.*?\))(  #.*)?$", src, re.M).group(1))
+                    for key in ("HOISTED_NAMES", "HOISTED_TEXTS"))
+    return SimpleNamespace(hoisted_values=namespace["hoisted_values"], HOISTED_NAMES=names, HOISTED_TEXTS=texts)
 
 
 def test_loop_invariants_are_evaluated_on_the_host_and_refused_when_undefined():
@@ -160,7 +161,8 @@ def test_loop_invariants_are_evaluated_on_the_host_and_refused_when_undefined():
     unpacked = re.findall(r"^    (_\w+) = hv\[(\d+)\]$", src, re.M)
     assert [(name, int(k)) for name, k in unpacked] == [(name, k) for k, name in enumerate(module.HOISTED_NAMES)]
     assert module.HOISTED_NAMES == tuple(f"_inv{k}" for k in range(7))
-    with pytest.raises(ParameterError, match="_inv3 of its expressions NaN"):
+    assert module.HOISTED_TEXTS[3] == "_inv3 = sqrt(2)*sqrt(D)"  # what the message names
+    with pytest.raises(ParameterError, match=re.escape("make _inv3 = sqrt(2)*sqrt(D) NaN")):
         _auto_cuda.hoisted_values(module, [1.0, 0.2, 0.025, -0.05, 1.0], 1e-3, np.float64)
     # the f32 module's own function (its literals typed float32), rounded to float32
     src32, _ = _auto_cuda.generate_cuda_source(automaton, "symplectic", obs, lay=lay, precision="f32")
@@ -178,9 +180,10 @@ def test_loop_invariants_are_evaluated_on_the_host_and_refused_when_undefined():
     # IEEE semantics: an overflowing intermediate is inf, as on the device; a NaN is refused
     namespace = {"math": math}
     exec("def hoisted_values(p, dt):\n    return (1.0 / (1.0 + math.exp(p[0])), p[1] ** (1 / 3))\n", namespace)
-    fake = SimpleNamespace(hoisted_values=namespace["hoisted_values"], HOISTED_NAMES=("_inv0", "_inv1"))
+    fake = SimpleNamespace(hoisted_values=namespace["hoisted_values"], HOISTED_NAMES=("_inv0", "_inv1"),
+                           HOISTED_TEXTS=("_inv0 = 1/(exp(k) + 1)", "_inv1 = m**(1/3)"))
     assert _auto_cuda.hoisted_values(fake, [800.0, 8.0], 1e-3, np.float64) == (0.0, 2.0)
-    with pytest.raises(ParameterError, match="_inv1 of its expressions NaN"):
+    with pytest.raises(ParameterError, match=re.escape("make _inv1 = m**(1/3) NaN")):
         _auto_cuda.hoisted_values(fake, [800.0, -8.0], 1e-3, np.float64)
 
 

@@ -205,6 +205,12 @@ class _Names:
         """The names :meth:`hoisted_lines` binds for the loops (the preamble's temporaries left out)."""
         return self.preamble_names + [str(name) for name in self.hoisted.values()]
 
+    def hoisted_texts(self) -> list[str]:
+        """Each of :meth:`hoisted_names` as a reader knows it: the expression in the model's own names."""
+        back = {code: real for real, code in self.subs.items()}
+        return ([f"the exact OU factor {name}" for name in self.preamble_names]
+                + [f"{name} = {sp.sstr(e.xreplace(back))}" for e, name in self.hoisted.items()])
+
     def hoisted_function(self) -> str:
         """A plain Python function ``hoisted_values(p, dt)`` of the module: the values of :meth:`hoisted_names`,
         evaluated once on the host (the CUDA kernel takes them as launch arguments, in its constant bank)."""
@@ -598,6 +604,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
             f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_nbf{o} = _fty(_nb{o})\n"
             f"_sum{o} = 0.0" for o in range(len(obs))]) or "pass", " " * 4),
         hoisted_function=names.hoisted_function(), hoisted_names=tuple(names.hoisted_names()),
+        hoisted_texts=tuple(names.hoisted_texts()),
         unpack_step=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines())
                         or "pass", " " * 4),
         lane_to_out=ind("\n".join(f"out[_g + _l, (step + 1) // every, {i}] = _L{i}[_l]" for i in range(n)),

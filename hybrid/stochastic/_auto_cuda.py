@@ -120,6 +120,7 @@ P_OFF = {p_off}  # the phase sections (section, observable, bin)
 CELLS = {cells}
 HOISTED_NAMES = {hoisted_names}  # loop invariants of the model's expressions: the launch argument hv
 N_HOISTED = len(HOISTED_NAMES)  # (hoisted_values)
+HOISTED_TEXTS = {hoisted_texts}  # the same in the model's names, for messages
 '''
 
 _KERNEL = '''\
@@ -767,10 +768,9 @@ def hoisted_values(module, p, dt, ftype) -> tuple:
                              f"expressions undefined ({type(exc).__name__}: {exc})") from None
     bad = [k for k, v in enumerate(values) if v != v]
     if bad:
-        raise ParameterError(f"the model's parameters {tuple(float(v) for v in p)} make loop invariant "
-                             f"{module.HOISTED_NAMES[bad[0]]} of its "
-                             "expressions NaN (a square root of a negative number, a negative number to a "
-                             "fractional power, ...)")
+        raise ParameterError(f"the model's parameters {tuple(float(v) for v in p)} make {module.HOISTED_TEXTS[bad[0]]} "
+                             "NaN, a value of its expressions that the device needs (a square root of a negative "
+                             "number, a negative number to a fractional power, ...)")
     return tuple(ftype(v) for v in values) or (ftype(0.0),)
 
 
