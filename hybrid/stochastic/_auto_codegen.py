@@ -198,6 +198,10 @@ class _Names:
             self.hoisted[e] = sp.Symbol(f"_inv{len(self.hoisted)}")  # a prefix no other generated name uses
         return self.hoisted[e]
 
+    def param_lines(self) -> list[str]:
+        """``_pj = p[j]``: the parameters as the kernels' scalars."""
+        return [f"_p{j} = p[{j}]" for j in range(self.np)]
+
     def hoisted_lines(self) -> list[str]:
         return self.preamble + [f"{name} = {self.printer.doprint(e)}" for e, name in self.hoisted.items()]
 
@@ -215,8 +219,8 @@ class _Names:
         """A plain Python function ``hoisted_values(p, dt)`` of the module: the values of :meth:`hoisted_names`,
         evaluated once on the host (the CUDA kernel takes them as launch arguments, in its constant bank)."""
         names = self.hoisted_names()
-        body = (["sdt = math.sqrt(dt)", "hdt = 0.5 * dt"] + [f"_p{j} = p[{j}]" for j in range(self.np)]
-                + self.hoisted_lines() + [f"return ({''.join(n + ', ' for n in names)})"])
+        body = (["sdt = math.sqrt(dt)", "hdt = 0.5 * dt"] + self.param_lines() + self.hoisted_lines()
+                + [f"return ({''.join(n + ', ' for n in names)})"])
         return "def hoisted_values(p, dt):\n" + textwrap.indent("\n".join(body), "    ") + "\n"
 
     def ou_factors(self, lines: list, tag: str, c) -> None:
@@ -238,7 +242,7 @@ class _Names:
             lines.extend(code)
 
     def unpack(self) -> list[str]:
-        return [f"_x{i} = x[{i}]" for i in range(self.n)] + [f"_p{j} = p[{j}]" for j in range(self.np)]
+        return [f"_x{i} = x[{i}]" for i in range(self.n)] + self.param_lines()
 
     def scalar_block(self, target: str, outputs: list, extra: dict) -> str:
         """Straight-line code ``{target}0 = ...`` (scalars) of ``outputs`` on the kernel's scalars ``_x0, ...``."""
@@ -574,11 +578,11 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
     )
     template = _TEMPLATE if template is None else template
+    ranges = [f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
+              for o in range(len(obs))]  # the observables' histogram ranges and sums as the kernels' scalars
     src = (_located(template) if located else template).format(
         **(fields or {}),
-        unpack=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines() + [
-            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
-            for o in range(len(obs))]) or "pass", " " * 4),
+        unpack=ind("\n".join(names.param_lines() + names.hoisted_lines() + ranges) or "pass", " " * 4),
         binning=ind(_binning(list(observables), summed, joint_only), " " * 16),
         to_ob=ind("\n".join(f"ob[{o}] = _ob{o}" for o in range(len(obs))) or "pass", " " * 20),
         flush=ind("\n".join(f"sums[{o}] += _sum{o}" for o in range(len(obs))) or "pass",
@@ -598,14 +602,14 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         n_trans=len(st.transitions), max_events=MAX_EVENTS,
         funcs="\n\n".join(funcs),
         lane_step=_LANE_STEP.format(**step),
-        # the CUDA kernel's unpacking: the loop invariants come evaluated, as the launch argument hv
-        unpack_args=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))]
-                                  + [f"{name} = hv[{k}]" for k, name in enumerate(names.hoisted_names())] + [
-            f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_nbf{o} = _fty(_nb{o})\n"
-            f"_sum{o} = 0.0" for o in range(len(obs))]) or "pass", " " * 4),
+        # the CUDA kernel's unpacking: the loop invariants come evaluated, as the launch argument hv, and the bin
+        # counts also in the kernel's float type (_to_device compares the bin coordinates with those)
+        unpack_args=ind("\n".join(names.param_lines()
+                                  + [f"{name} = hv[{k}]" for k, name in enumerate(names.hoisted_names())] + ranges
+                                  + [f"_nbf{o} = _fty(_nb{o})" for o in range(len(obs))]) or "pass", " " * 4),
         hoisted_function=names.hoisted_function(), hoisted_names=tuple(names.hoisted_names()),
         hoisted_texts=tuple(names.hoisted_texts()),
-        unpack_step=ind("\n".join([f"_p{j} = p[{j}]" for j in range(len(st.params))] + names.hoisted_lines())
+        unpack_step=ind("\n".join(names.param_lines() + names.hoisted_lines())
                         or "pass", " " * 4),
         lane_to_out=ind("\n".join(f"out[_g + _l, (step + 1) // every, {i}] = _L{i}[_l]" for i in range(n)),
                         " " * 20),

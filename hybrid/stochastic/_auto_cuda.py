@@ -243,11 +243,13 @@ assert _CUDA_TEMPLATE_RECORD.count("{record_rows}") == 1 and _KERNEL.count(_RECO
 _DECORATOR = re.compile(r"^@nb\.njit\([^)]*\)$", re.M)
 _HIST = re.compile(r"^(\s*)hist\[(\d+), (.+)\] \+= 1$", re.M)
 _VHIST = re.compile(r"^(\s*)vhist\[best, (.+)\] \+= 1$", re.M)
+_BIN_COUNT = re.compile(r"\b_b < _nb(\d+)\b")
 
 
 def _to_device(src: str) -> str:
     """The CPU statements of the generated pieces that the device does otherwise: ``@nb.njit`` -> device functions,
-    per-chunk histogram increments -> atomics on the flat cells (shared where they fit)."""
+    per-chunk histogram increments -> atomics on the flat cells (shared where they fit), comparisons with an
+    integer bin count -> with the count in the kernel's float type."""
     if re.search(r"\b_user_law\b", src):
         raise ModelError("scheduler='cuda' needs the restitution law as a sympy expression of v "
                          "(CustomRestitution('...')); a Python callable cannot be compiled for the device")
@@ -255,8 +257,11 @@ def _to_device(src: str) -> str:
     src = _HIST.sub(lambda m: f"{m[1]}count(sh, gh, H_OFF + {m[2]} * WIDTH + {m[3]})", src)
     # the speeds' cells come first in the layout and always fit in the shared copy (event_step gets it as vhist)
     src = _VHIST.sub(lambda m: f"{m[1]}cuda.atomic.add(vhist, best * VW + {m[2]}, 1)", src)
+    # the bin coordinate against the bin count in the kernel's float type (_nbf, bound by the kernel's unpacking):
+    # float32 < int64 compares in double, which consumer GPUs run at a small fraction of the single-precision rate
+    src = _BIN_COUNT.sub(r"_b < _nbf\1", src)
     left = [line.strip() for line in src.splitlines()
-            if re.search(r"\b(nb\.|hist\[|vhist\[|jhist\[|phist\[|np\.empty|np\.zeros)", line)]
+            if re.search(r"\b(nb\.|hist\[|vhist\[|jhist\[|phist\[|np\.empty|np\.zeros)|< _nb\d", line)]
     if left:
         raise ModelError(f"the CUDA translation of the automaton kernel left CPU statements {left[:3]}; "
                          "hybrid/stochastic/_auto_cuda.py must learn them")
@@ -361,9 +366,6 @@ def generate_cuda_source(automaton, scheme: str, observables: dict, convention: 
                                             phases=phases, template=_CUDA_TEMPLATE_RECORD if record else _CUDA_TEMPLATE,
                                             fields=fields)
     src = _to_device(src)
-    # the bin coordinate against the bin count in the kernel's float type: float32 < int64 compares in double,
-    # which consumer GPUs run at a small fraction of the single-precision rate (the count is exact in either)
-    src = re.sub(r"\b_b < _nb(\d+):", r"_b < _nbf\1:", src)
     if precision == "f32":
         tree = _Float32().visit(ast.parse(src))
         src = "\n".join(src.splitlines()[:2]) + "\n" + ast.unparse(ast.fix_missing_locations(tree)) + "\n"
