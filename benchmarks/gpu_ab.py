@@ -45,6 +45,8 @@ def worker(args) -> None:
 
     table = automaton_models()
 
+    # its own run helper, not gpu_throughput's: a baseline tree's gpu_throughput.py is only sure to have
+    # automaton_models and DT
     def ens(name, paths, steps):
         automaton, scheme, kw = table[name]
         with warnings.catch_warnings():
