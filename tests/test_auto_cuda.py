@@ -109,7 +109,7 @@ def test_device_module_is_the_generators_own_code(automaton, scheme):
     fast = cpu[cpu.index("                if mode == 0:"):cpu.index("                    _slow = True")]
     assert fast.count("\n") > 5 and fast in dev
     assert "@nb.njit" not in dev and dev.count("@cuda.jit(device=True)") >= 7
-    assert "cuda.atomic.add(vhist, best * VW + int(vb), 1)" in dev and "count(sh, gh, H_OFF + 0 * WIDTH" in dev
+    assert "cuda.atomic.add(vhist, best * VW + np.int64(vb), 1)" in dev and "count(sh, gh, H_OFF + 0 * WIDTH" in dev
 
 
 def test_f32_module_types_every_float_literal():

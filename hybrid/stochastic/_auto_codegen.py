@@ -55,7 +55,7 @@ from hybrid.errors import ModelError
 
 from ._kernel_modules import _Printer
 
-TEMPLATE_VERSION = "6"
+TEMPLATE_VERSION = "7"
 SCHEME_CODES = {"em": 0, "milstein": 1, "splitting": 2, "symplectic": 3, "baoab": 4, "naive": 5}
 """The generated module's ``SCHEME``: Euler-Maruyama, Milstein (commutative noise), splitting (kick, free flight,
 noise, kick), symplectic Milstein (the velocities' Milstein step, then the positions' free flight), BAOAB (kick by
@@ -264,7 +264,7 @@ class _Names:
         else:
             body += [f"{target}[{i}] = {self.printer.doprint(e)}" for i, e in enumerate(reduced)]
             sig = f"def {name}(x, t, p, {target}):"
-        return "@nb.njit(cache=CACHE)\n" + sig + "\n" + textwrap.indent("\n".join(body), "    ") + "\n"
+        return "@nb.njit(**INNER)\n" + sig + "\n" + textwrap.indent("\n".join(body), "    ") + "\n"
 
 
     def model(self, kinds: list) -> str:
@@ -292,7 +292,7 @@ class _Names:
             lines.append(f"{'if' if kk == 0 else 'elif'} _kind == F_{kind}:")
             lines.append(textwrap.indent("\n".join(branch) or "pass", "    "))
         lines.append("return 0.0")
-        return ("@nb.njit(cache=CACHE)\ndef model(_kind, _which, x, t, p, out):\n"
+        return ("@nb.njit(**INNER)\ndef model(_kind, _which, x, t, p, out):\n"
                 + textwrap.indent("\n".join(lines), "    ") + "\n")
 
 
@@ -655,10 +655,11 @@ def _binning(names: list, summed, joint_only=()) -> str:
                       textwrap.indent("\n".join(slow), "    ")])
 
 
+# bins by np.int64(b), not int(b): numba compiles int() of a float as a function of its own (in every kernel)
 _BINNING_FINITE = """\
 _b = (_ob{o} - _lo{o}) * _sc{o}
 if _b >= 0.0 and _b < _nb{o}:
-    hist[{o}, int(_b) + 1] += 1
+    hist[{o}, np.int64(_b) + 1] += 1
 elif _b < 0.0:
     hist[{o}, 0] += 1
 else:
@@ -674,7 +675,7 @@ _BINNING = """\
 _v = _ob{o}
 _b = (_v - _lo{o}) * _sc{o}
 if _b >= 0.0 and _b < _nb{o}:
-    hist[{o}, int(_b) + 1] += 1
+    hist[{o}, np.int64(_b) + 1] += 1
 elif _b < 0.0:
     hist[{o}, 0] += 1
 elif _v == _v:
@@ -735,6 +736,9 @@ import numpy as np
 from hybrid.stochastic._rng import next_normal
 
 CACHE = {cache}
+# the functions that only the kernels call: no entry points from Python or C (each costs about 0.05 s of a
+# cold compile)
+INNER = dict(cache=CACHE, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 N = {n}
 M = {m}
 N_OBS = {n_obs}
@@ -810,7 +814,7 @@ def _illinois_body(step: str, flight: str, guard: str, at_zero: str = "", end: s
 
 
 _TEMPLATE_EVENTS = '''\
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def crosses(d, g0, g1):
     # a state just reset onto the guard (g0 = 0) fires again only if the step carries it strictly beyond (with
     # Euler-Maruyama the velocity on the segment need not match the motion of the positions)
@@ -821,7 +825,7 @@ def crosses(d, g0, g1):
     return False
 
 
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def interpolate(xa, va, xb, s, dt, free_flight, xs):
     # the step's interpolant at fraction s: the free flight of the positions at the velocities va (splitting), or
     # the straight segment from xa to xb
@@ -835,7 +839,7 @@ def interpolate(xa, va, xb, s, dt, free_flight, xs):
             xs[i] = xa[i] + s * (xb[i] - xa[i])
 
 
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
     # Illinois regula falsi for the guard on the interpolant, bracketed on [0, 1]; returns s
 ''' + _illinois_body("dt", "free_flight", "model(F_GUARD, j, xs, t0 + s * dt, p, xs)",
@@ -843,7 +847,7 @@ def locate(j, xa, va, xb, t0, dt, p, free_flight, g0, g1, xs):
                   end="    # the state at s must not be beyond the guard: take the bracket end on the side it came "
                       "from\n") + '''
 
-@nb.njit(nogil=True, cache=CACHE)
+@nb.njit(**INNER)
 def event_step(mode, x, t, t_end, dt, dw, p, rec, vhist, v_scale, v_bins, track, iw, fw, ws, elog):
     """One whole step of the path ``x`` in ``mode`` through the general event loop; returns the mode after it.
 
@@ -1063,7 +1067,7 @@ def record_chunk(state, npaths, n_steps, every, dt, t0, x0, mode0, p, zx, zk, zf
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
 
 
-@nb.njit(nogil=True, cache=CACHE)
+@nb.njit(**INNER)
 def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, psums, pcount):
     """The lanes' observables into phase section ``kp`` (out of line: inside the kernel's loop it slowed the
     time average's statistics by about 10 %)."""
@@ -1083,12 +1087,12 @@ def record_phase(kp, XL, nl, t, p, x, ob, obs_lo, obs_scale, obs_bins, phist, ps
             elif b >= obs_bins[o]:
                 phist[kp, o, obs_bins[o] + 1] += 1
             else:
-                phist[kp, o, int(b) + 1] += 1
+                phist[kp, o, np.int64(b) + 1] += 1
 
 
 '''
 _TEMPLATE_OUTSIDE = '''\
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def outside(mode, x, t, p):
     # the admissible set: no self-loop guard of the mode may be beyond its firing side
     for jj in range(COUNT[mode]):
@@ -1158,7 +1162,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                     bx = (JL[_l, 0] - j_lo[0]) * j_scale[0]
                     by = (JL[_l, 1] - j_lo[1]) * j_scale[1]
                     if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
-                        jhist[int(by), int(bx)] += 1
+                        jhist[np.int64(by), np.int64(bx)] += 1
                     else:
                         counts[4] += 1
     counts[0] += _nsamp
@@ -1173,8 +1177,10 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
         gs = FW_GSTAT + 4 * j
         gstat[j, 0] += fw[gs]
         gstat[j, 1] += fw[gs + 1]
-        gstat[j, 2] = min(gstat[j, 2], fw[gs + 2])
-        gstat[j, 3] = max(gstat[j, 3], fw[gs + 3])
+        if fw[gs + 2] < gstat[j, 2]:  # not min() and max(): each is a function numba compiles apart
+            gstat[j, 2] = fw[gs + 2]
+        if fw[gs + 3] > gstat[j, 3]:
+            gstat[j, 3] = fw[gs + 3]
 {flush}
     state[0], state[1], state[2], state[3] = s0, s1, s2, s3
 
@@ -1302,7 +1308,7 @@ if rec:
     fw[best] += speed
     vb = speed * v_scale
     if vb < v_bins:
-        vhist[best, int(vb)] += 1
+        vhist[best, np.int64(vb)] += 1
     else:
         vhist[best, v_bins] += 1
 model(F_RESET, best, xs, {when}, p, xr)
@@ -1444,7 +1450,7 @@ NOISE, OU = 2, 4  # the sub-steps that move the velocities only and are located:
 VGUARD = np.array({vguards}, dtype=np.int64)  # 1 where the guard depends on a velocity
 
 
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def view_guard(j, mode, xs, ua, ub, s, t, dt, p, lin, kicked, xv, fv):
     """Guard j of the velocities on the state ``xs`` read with velocities of its own instant: with ``lin``, those
     at the share s of the flight piece from ``ua`` to ``ub``; with ``kicked``, xs's after splitting's closing kick
@@ -1462,13 +1468,13 @@ def view_guard(j, mode, xs, ua, ub, s, t, dt, p, lin, kicked, xv, fv):
     return model(F_GUARD, j, xv, t, p, xv)
 
 
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def locate_view(j, mode, xa, va, xb, ua, ub, t0, tau, dt, p, flight, lin, kicked, g0, g1, xs, xv, fv):
     # locate()'s Illinois regula falsi for a guard of the velocities read by view_guard on the interpolant
 ''' + _illinois_body("tau", "flight",
                      "view_guard(j, mode, xs, ua, ub, s, t0 + s * tau, dt, p, lin, kicked, xv, fv)") + '''
 
-@nb.njit(cache=CACHE)
+@nb.njit(**INNER)
 def velocity_leg(kind, mode, x, t, dt, dw, p, rec, vhist, v_scale, v_bins, iw, fw, ws, elog, n_ev):
     """One sub-step of ``x`` that moves the velocities only, at the instant ``t``; returns (mode, events so far).
 
