@@ -655,7 +655,7 @@ def _binning(names: list, summed, joint_only=()) -> str:
                       textwrap.indent("\n".join(slow), "    ")])
 
 
-# bins by np.int64(b), not int(b): numba compiles int() of a float as a function of its own (in every kernel)
+# bins by np.int64(b), not int(b): numba compiles int() of a float as a function of its own (in every CPU kernel)
 _BINNING_FINITE = """\
 _b = (_ob{o} - _lo{o}) * _sc{o}
 if _b >= 0.0 and _b < _nb{o}:
@@ -737,7 +737,8 @@ from hybrid.stochastic._rng import next_normal
 
 CACHE = {cache}
 # the functions that only the kernels call: no entry points from Python or C (each costs about 0.05 s of a
-# cold compile)
+# cold compile). Called from Python, such a function crashes the interpreter: call run_chunk, drive or
+# record_chunk, which keep theirs
 INNER = dict(cache=CACHE, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 N = {n}
 M = {m}

@@ -184,7 +184,7 @@ by itself; the command line turns the record into one line on stderr, so a first
 
 COMPILE_ESTIMATE_S = {"vibro_auto": 8, "vibro_auto_cuda": None}
 """About how long a cold compile takes, by kernel family, the module name's prefix (the longest that matches): the
-CPU kernels of the automaton generator take 6 - 9 CPU s on 2 cores (medians 6.0 - 7.4 on a quiet machine,
+CPU kernels of the automaton generator take 5 - 9 CPU s on 2 cores (medians 6.0 - 8.3 in the last measurement,
 docs/results/compile-time.md); only said to the user. Compiles of the CUDA kernels have not been measured (None: no
 figure is claimed)."""
 
