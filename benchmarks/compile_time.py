@@ -4,6 +4,7 @@
     python benchmarks/compile_time.py --reps 1 --functions   # and each numba function's own compile time
     python benchmarks/compile_time.py --baseline main        # and the same in a ``git archive`` of main, interleaved
     python benchmarks/compile_time.py --baseline main --throughput   # and path-steps per CPU s of each kernel
+    python benchmarks/compile_time.py --baseline main --warm 4       # and 4 recompiles in each warm process
 
 Kernels: Example 1 (``simulate_ensemble(DuffingImpact(Ma(0.4)), "milstein")``, the automaton kernel's symplectic
 scheme), the impact pair with ``splitting`` and a forced linear oscillator with phase sections (``splitting``,
@@ -15,7 +16,11 @@ compiles alone (numba's ``numba:compile`` events of top-level functions), the pa
 ``numba:llvm_lock`` events: optimisation and machine code) and the size of the generated kernel source. The median
 over repetitions is what issue 22 budgets (at most 2 s). With ``--baseline REF`` each kernel is also compiled by the
 tree of the git revision REF (``git archive`` into a temporary folder), alternating with this tree, and the ratio of
-the medians is printed: a before/after measured in the same run, under the same load.
+the medians is printed: a before/after measured in the same run, under the same load. With ``--warm N`` each fresh
+process then compiles its kernel N more times, under fresh module names (a new name is a new file, which neither
+the loaded modules nor numba's disk cache hold): numba's own start-up is then paid, and what is timed is the
+kernel's compile alone. On a shared machine whose speed drifts, the least of these is the steadiest figure for
+comparing two generators.
 """
 
 from __future__ import annotations
@@ -106,22 +111,34 @@ if {throughput!r}:  # path-steps per CPU second of a longer run, the kernel comp
     rate = 64 * 200000 / (time.process_time() - c1)
 import os, pathlib
 kernels = [f for f in pathlib.Path(os.environ["VIBRO_CACHE_DIR"]).glob("*.py")]
-print(json.dumps(dict(wall=wall, cpu=cpu, numba_wall=sum(c[1] for c in compiles),
-                      numba_cpu=sum(c[2] for c in compiles), llvm_cpu=sum(llvm), functions=[c[0] for c in compiles],
-                      own=own, source_lines=sum(len(f.read_text().splitlines()) for f in kernels),
-                      path_steps_per_cpu_s=rate)))
+result = dict(wall=wall, cpu=cpu, numba_wall=sum(c[1] for c in compiles), numba_cpu=sum(c[2] for c in compiles),
+              llvm_cpu=sum(llvm), functions=[c[0] for c in compiles], own=own,
+              source_lines=sum(len(f.read_text().splitlines()) for f in kernels), path_steps_per_cpu_s=rate, warm=[])
+if {warm!r}:  # the same kernel compiled again in this (warm) process, under fresh module names
+    from hybrid.stochastic import _kernel_modules
+    load, fresh = _kernel_modules.load_source, [0]
+
+    def load_fresh(name, src, *args, **kwargs):  # a new name is a new file: numba's disk cache has no entry for it
+        return load(f"{{name}}w{{fresh[0]}}", src, *args, **kwargs)
+
+    _kernel_modules.load_source = load_fresh
+    for fresh[0] in range({warm!r}):
+        c1 = time.process_time()
+        run(small)
+        result["warm"].append(time.process_time() - c1)
+print(json.dumps(result))
 """
 
 CASES = ("example1-milstein", "impact-pair-splitting", "forced-phases")
 
 
-def cold(case: str, tree: Path = ROOT, throughput: bool = False) -> dict:
+def cold(case: str, tree: Path = ROOT, throughput: bool = False, warm: int = 0) -> dict:
     """One cold first run of ``case`` by the source ``tree`` in a fresh process with empty kernel and numba caches
     (``throughput``: then the path-steps per CPU second of 64 paths x 200,000 steps with the kernel compiled)."""
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "VIBRO_CACHE_DIR": str(Path(tmp) / "vibro"), "NUMBA_CACHE_DIR": str(Path(tmp) / "numba"),
                "PYTHONPATH": str(tree)}
-        code = _CHILD.format(tests=str(tree / "tests"), case=case, throughput=throughput)
+        code = _CHILD.format(tests=str(tree / "tests"), case=case, throughput=throughput, warm=warm)
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tree)
         if out.returncode:
             sys.exit(out.stderr)
@@ -144,6 +161,8 @@ def main():
     ap.add_argument("--baseline", metavar="REF", help="also compile with the tree of git revision REF, interleaved")
     ap.add_argument("--throughput", action="store_true",
                     help="also path-steps per CPU second of each kernel after its compile (64 x 200,000 steps)")
+    ap.add_argument("--warm", type=int, default=0, metavar="N",
+                    help="also compile each kernel N more times in the same process, under fresh module names")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as base:
         if args.baseline:
@@ -155,9 +174,9 @@ def main():
         for case in args.cases:
             runs, before = [], []
             for _ in range(args.reps):  # interleaved: both trees see the same load
-                runs.append(cold(case, throughput=args.throughput))
+                runs.append(cold(case, throughput=args.throughput, warm=args.warm))
                 if args.baseline:
-                    before.append(cold(case, Path(base), throughput=args.throughput))
+                    before.append(cold(case, Path(base), throughput=args.throughput, warm=args.warm))
             if args.baseline:
                 old = _line(f"{case} ({args.baseline})", before)
             medians.append(_line(f"{case} (this tree)", runs))
@@ -172,6 +191,14 @@ def main():
                     line += (f" against {statistics.median(old):6.1f} for {args.baseline}: after / before "
                              f"{statistics.median(new) / statistics.median(old):.3f} (runs "
                              + ", ".join(f"{a:.1f}/{b:.1f}" for a, b in zip(new, old)) + ")")
+                print(line)
+            if args.warm:  # numba warm: only the kernel's own compile, the least of all runs is the least disturbed
+                new = [t for r in runs for t in r["warm"]]
+                line = f"{'':34s} warm compile least / median {min(new):5.2f} / {statistics.median(new):5.2f} cpu s"
+                if args.baseline:
+                    old = [t for r in before for t in r["warm"]]
+                    line += (f" against {min(old):5.2f} / {statistics.median(old):5.2f}: after / before "
+                             f"{min(new) / min(old):.2f} / {statistics.median(new) / statistics.median(old):.2f}")
                 print(line)
             if args.functions:  # each function's own compile, without those it compiles on the way (first run)
                 own = sorted(runs[0]["own"].items(), key=lambda kv: -kv[1])
