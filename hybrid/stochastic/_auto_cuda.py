@@ -445,15 +445,14 @@ class CudaRun:
         # the parameters and the histograms' ranges as tuples: launch arguments, which the device reads from its
         # constant bank (arrays are loaded once into registers that the whole step loop holds); one unused value
         # when a model has no parameters
-        params = tuple(ft(v) for v in a["p"]) or (ft(0.0),)
-        hoisted = hoisted_values(self.module, a["p"], a["dt"], ft)
-
         def floats(v):
             return tuple(ft(w) for w in v)
 
         def ints(v):
             return tuple(np.int64(w) for w in v)
 
+        params = floats(a["p"]) or (ft(0.0),)
+        hoisted = hoisted_values(self.module, a["p"], a["dt"], ft)
         self.scalars = (ft(a["dt"]), ft(0.0), params, hoisted, floats(a["obs_lo"]), floats(a["obs_scale"]),
                         ints(a["obs_bins"]), np.int64(a["jx"]), np.int64(a["jy"]), floats(a["j_lo"]),
                         floats(a["j_scale"]), ints(a["j_bins"]), ft(a["v_scale"]), np.int64(a["v_bins"]))
