@@ -1,0 +1,341 @@
+"""What the pieces of the automaton CUDA kernel cost: variants of its generated source, timed in one process.
+
+    python benchmarks/gpu_ablation.py                                  # Example 1, every variant, 3 rounds
+    python benchmarks/gpu_ablation.py --models "impact pair" --variants norng,nobook,combo
+    python benchmarks/gpu_ablation.py --ncu combo    # one launch of 2**17 x 2000 steps of one variant, for ncu:
+    ncu -k regex:advance --launch-count 1 --section SourceCounters -o combo \
+        python benchmarks/gpu_ablation.py --ncu combo
+    NUMBA_ENABLE_CUDASIM=1 NUMBA_DISABLE_JIT=1 python benchmarks/gpu_ablation.py --quick   # a check, not a timing
+
+Each variant is the device module of ``simulate_automaton(..., scheduler="cuda")`` with one change made to its
+text (or, for ``nobm``, to the normal generator it imports), compiled under its own module name. Two kinds:
+
+* **ablations** cut a piece out, to price it; their numbers are wrong on purpose (``norng``: a multiplicative hash
+  in place of Philox and Box-Muller; ``nobm``: Philox with uniforms in place of Box-Muller; ``nostats``: no
+  statistics at all; ``nohist``: no histogram increment). ``nobook`` keeps only the bookkeeping this benchmark's
+  runs need (no burn-in, every step a sample, no phase sections), so its numbers are the kernel's.
+* **rewrites** do the same arithmetic in another shape and must give the kernel's numbers to the last digit
+  (checked: E[observable] is compared with the unchanged kernel's): ``lazyt`` (the step's times computed only where
+  the event code needs them), ``i32bin`` (32-bit histogram cells, straight into the block's shared copy),
+  ``i32loop`` (a 32-bit step counter), ``parity`` (a toggled parity instead of the 64-bit pair test), ``unroll2``
+  (two steps per loop pass, one Philox call at its head), ``ahead`` (as unroll2, drawing the next pair's normals a
+  pass early, so that they do not wait on the state), ``combo`` (lazyt + i32bin + i32loop + parity).
+
+All variants of a model run in one process on one warm device, in rounds whose order alternates, with the
+unchanged kernel (``base``) in every round: per variant it prints the path-steps/s of each timing (2**20 paths x
+20,000 steps of dt = 1e-3 from rest, compilation excluded) and the median over rounds of its ratio to base's
+median in the same round. Only such ratios compare: the H100s lent to this project drifted by up to 15 % within
+one such run. The models are those of ``gpu_throughput.py --automata``. A rewrite assumes the text the current
+template generates; where the template has changed, the variant stops with a message naming what it missed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from gpu_throughput import DT, automaton_models  # noqa: E402
+
+from hybrid.stochastic import _auto_cuda, _cuda_rng, simulate_automaton  # noqa: E402
+
+
+class TemplateChanged(SystemExit):
+    """A rewrite did not find the text it changes."""
+
+
+def _need(src: str, *pieces: str) -> None:
+    for piece in pieces:
+        if piece not in src:
+            raise TemplateChanged(f"gpu_ablation: the generated source has no {piece.strip()[:60]!r}: the template "
+                                  "changed; update the variant")
+
+
+# the generated text the variants change (the kernel template of hybrid/stochastic/_auto_cuda.py)
+_LOOP = "        for step in range(n0, n1):  # body indented as the CPU lane loop, for its pieces\n"
+_INIT_AT = "        _nsamp = np.int64(0)"
+_BOOK = """                phase_now = False
+                sample = False
+                if rec:
+                    phase_now = n_phase > 0 and (step + 1) % phase_steps == 0
+                    _cs += 1
+                    if _cs >= stride:
+                        _cs = 0
+                        sample = True
+"""
+_TIMES = "                t = t0 + _fty(step) * dt\n                _t1 = t0 + _fty(step + 1) * dt\n"
+_SLOW = "                if _slow:  # a guard may have fired: the step again through the general event loop\n"
+_CHECK = "                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard\n"
+_DRAW = "_za, _zb = normal_pair(rk, ip, _zp)"
+_DRAW1 = """                _q = np.uint64(step)
+                if (_q >> np.uint64(1)) != _zp:
+                    _zp = _q >> np.uint64(1)
+                    _za, _zb = normal_pair(rk, ip, _zp)
+                _w0 = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)
+"""
+_DRAW2 = """                _q = np.uint64(step) * np.uint64(2) + np.uint64(0)
+                if (_q >> np.uint64(1)) != _zp:
+                    _zp = _q >> np.uint64(1)
+                    _za, _zb = normal_pair(rk, ip, _zp)
+                _w0 = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)
+                _q = np.uint64(step) * np.uint64(2) + np.uint64(1)
+                if (_q >> np.uint64(1)) != _zp:
+                    _zp = _q >> np.uint64(1)
+                    _za, _zb = normal_pair(rk, ip, _zp)
+                _w1 = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)
+"""
+_HIST = re.compile(r"count\(sh, gh, H_OFF \+ (\d+) \* WIDTH \+ (np\.int64\(_b\) \+ 1|0|_nb\d+ \+ 1)\)")
+
+
+def norng(src):
+    _need(src, _DRAW)
+    cheap = ("_hh = (_zp * np.uint64(6364136223846793005) + np.uint64(ip) * np.uint64(1442695040888963407)) "
+             ">> np.uint64(11)\n" + " " * 20 + "_za = _fty(_hh) * _fty(3.8459253727671276e-16) - _fty(1.7320508)\n"
+             + " " * 20 + "_zb = _fty(1.7320508) - _fty(_hh & np.uint64(0xFFFFF)) * _fty(3.3e-6)")
+    return src.replace(_DRAW, cheap)
+
+
+def nobm(src):  # the source is unchanged but for this line: its own module; the generator is swapped in run()
+    return src + "\n# gpu_ablation variant nobm: Philox without Box-Muller\n"
+
+
+def nostats(src):
+    cut = "                if not (phase_now or sample):\n                    continue\n"
+    _need(src, cut)
+    return src.replace(cut, "                continue\n", 1)
+
+
+def nohist(src):
+    _need(src, "count(sh, gh, H_OFF + 0 * WIDTH + np.int64(_b) + 1)")
+    return src.replace("count(sh, gh, H_OFF + 0 * WIDTH + np.int64(_b) + 1)", "_nsamp += 0", 1)
+
+
+def nobook(src):
+    _need(src, _BOOK)
+    return src.replace(_BOOK, "                phase_now = False\n                sample = True\n")
+
+
+def lazyt(src):
+    _need(src, _TIMES, _SLOW, _CHECK)
+    fast = src.split(_TIMES)[1].split(_SLOW)[0]
+    if re.search(r"\bt\b|\b_t1\b", fast):
+        raise TemplateChanged("gpu_ablation: lazyt: this model's fast step uses the time")
+    times = " " * 20 + "t = t0 + _fty(step) * dt\n" + " " * 20 + "_t1 = t0 + _fty(step + 1) * dt\n"
+    return src.replace(_TIMES, "").replace(_SLOW, _SLOW + times).replace(_CHECK, _CHECK + times)
+
+
+def i32bin(src):
+    consts = {k: int(re.search(rf"^{k} = (\d+)", src, re.M).group(1)) for k in ("SH", "H_OFF", "WIDTH", "N_OBS")}
+    if consts["H_OFF"] + consts["N_OBS"] * consts["WIDTH"] > consts["SH"] or not _HIST.search(src):
+        raise TemplateChanged("gpu_ablation: i32bin: the observables' cells are not all in the shared copy")
+    return _HIST.sub(lambda m: f"cuda.atomic.add(sh, H_OFF + {m.group(1)} * WIDTH + "
+                               f"{m.group(2).replace('np.int64', 'np.int32')}, 1)", src)
+
+
+def i32loop(src):
+    _need(src, _LOOP)
+    return src.replace(_LOOP, "        for _k in range(np.int32(n1 - n0)):\n                step = n0 + np.int64(_k)\n")
+
+
+def parity(src):
+    if _DRAW1 in src:
+        draw = """                if _odd == 0:  # an even step: the pair of this step and the next
+                    _za, _zb = normal_pair(rk, ip, np.uint64(step) >> np.uint64(1))
+                    _w0 = sdt * _za
+                else:
+                    _w0 = sdt * _zb
+                _odd ^= 1
+"""
+        init = """        _odd = np.int32(n0 & 1)
+        if _odd == 1:
+            _za, _zb = normal_pair(rk, ip, np.uint64(n0) >> np.uint64(1))
+"""
+        _need(src, _INIT_AT)
+        return src.replace(_DRAW1, draw).replace(_INIT_AT, init + _INIT_AT)
+    _need(src, _DRAW2)  # two noises: one pair per step
+    return src.replace(_DRAW2, "                _za, _zb = normal_pair(rk, ip, np.uint64(step))\n"
+                               "                _w0 = sdt * _za\n                _w1 = sdt * _zb\n")
+
+
+def _unrolled(src, ahead):
+    _need(src, _LOOP, _DRAW1)
+    src = i32bin(lazyt(src)).replace(_DRAW1, "                _w0 = sdt * (_za if _h == 0 else _zb)\n")
+    if ahead:
+        head = ("        _na, _nb = normal_pair(rk, ip, np.uint64(n0 >> 1))\n"
+                "        for _pair in range(n0 >> 1, (n1 + 1) >> 1):\n"
+                "            _za = _na\n            _zb = _nb\n"
+                "            _na, _nb = normal_pair(rk, ip, np.uint64(_pair + 1))\n")
+    else:
+        head = ("        for _pair in range(n0 >> 1, (n1 + 1) >> 1):\n"
+                "            _za, _zb = normal_pair(rk, ip, np.uint64(_pair))\n")
+    head += ("            for _h in range(2):\n                step = 2 * _pair + _h\n"
+             "                if step < n0 or step >= n1:\n                    continue\n")
+    return src.replace(_LOOP, head)
+
+
+def unroll2(src):
+    return _unrolled(src, False)
+
+
+def ahead(src):
+    return _unrolled(src, True)
+
+
+def combo(src):
+    return parity(i32loop(i32bin(lazyt(src))))
+
+
+VARIANTS = {"base": lambda src: src, "norng": norng, "nobm": nobm, "nostats": nostats, "nohist": nohist,
+            "nobook": nobook, "lazyt": lazyt, "i32bin": i32bin, "i32loop": i32loop, "parity": parity,
+            "unroll2": unroll2, "ahead": ahead, "combo": combo}
+EXACT = ("nobook", "lazyt", "i32bin", "i32loop", "parity", "unroll2", "ahead", "combo")
+"""The variants that must give the unchanged kernel's numbers (on these runs: no burn-in, stride 1, no phases)."""
+
+
+def _philox_uniforms(precision):
+    """A device ``normal_pair`` that returns two Philox words as uniforms of variance 1 (no Box-Muller)."""
+    from numba import cuda
+
+    device = cuda.jit(device=True, inline=True)
+    philox = device(_cuda_rng._make_philox(device(_cuda_rng._philox_round)))
+    mask, s32 = _cuda_rng._MASK, _cuda_rng._S32
+    ft = np.float32 if precision == "f32" else np.float64
+    scale, shift = ft(2.0 * 3.0**0.5 / 2**32), ft(3.0**0.5)
+
+    def pair(rk, path, q):
+        pr = np.uint64(q)
+        pa = np.uint64(path)
+        a, b, c, d = philox(pr & mask, pr >> s32, pa & mask, pa >> s32, rk)
+        return ft(a) * scale - shift, ft(c) * scale - shift
+
+    return device(pair)
+
+
+def run(args) -> dict:
+    automaton, scheme, kw = automaton_models()[args.models]
+    original_source = _auto_cuda.generate_cuda_source
+    original_pair = _cuda_rng.device_normal_pair(args.precision)
+    sim = _auto_cuda.simulator_enabled()
+
+    def use(variant):
+        def generate(*a, **k):
+            src, st = original_source(*a, **k)
+            return VARIANTS[variant](src), st
+
+        _auto_cuda.generate_cuda_source = generate
+        _cuda_rng._DEVICE[args.precision] = _philox_uniforms(args.precision) if variant == "nobm" else original_pair
+
+    def ensemble(paths, steps):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return simulate_automaton(automaton, scheme, dt=DT, paths=paths, t_end=steps * DT, t_burn=0.0, seed=1,
+                                      check_dt=False, scheduler="cuda", threads_per_block=128,
+                                      precision=args.precision, **kw)
+
+    if args.ncu:
+        use(args.ncu)
+        g = ensemble(2**17, 2000)
+        print(f"{args.ncu}: one launch, {g.settings['device_seconds']:.3f} s")
+        return {}
+    names = ["base"] + [v for v in args.variants.split(",") if v != "base"]
+    unknown = [v for v in names if v not in VARIANTS]
+    if unknown:
+        raise SystemExit(f"gpu_ablation: unknown variants {unknown}; choose from {', '.join(VARIANTS)}")
+    rows = {v: {"rates": [], "round_medians": []} for v in names}
+    skipped: dict = {}
+    try:
+        for r in range(args.rounds):
+            for v in names if r % 2 == 0 else names[::-1]:
+                if v in skipped:
+                    continue
+                use(v)
+                row = rows[v]
+                if "compile_s" not in row:
+                    t0 = time.perf_counter()
+                    try:
+                        ensemble(128, 10)
+                    except TemplateChanged as exc:  # a rewrite that does not fit this model's source
+                        skipped[v] = str(exc)
+                        print(f"{v}: skipped ({exc})", flush=True)
+                        continue
+                    row["compile_s"] = time.perf_counter() - t0
+                rates = []
+                for _ in range(args.timings):
+                    g = ensemble(args.paths, args.steps)
+                    rates.append(args.paths * args.steps / g.settings["device_seconds"])
+                row["rates"] += rates
+                row["round_medians"].append(statistics.median(rates))
+                row["mean"] = str(g.mean(g.names[0]))
+                if not sim:
+                    row.update(_auto_cuda.kernel_resources(g.settings))
+                print(f"round {r + 1} {v:<8} {' '.join(f'{x:.3g}' for x in rates)} path-steps/s; "
+                      f"E[{g.names[0]}] = {row['mean']}", flush=True)
+    finally:
+        _auto_cuda.generate_cuda_source = original_source
+        _cuda_rng._DEVICE[args.precision] = original_pair
+    print(f"\n{args.models}, {args.precision}, {args.paths} paths x {args.steps} steps"
+          + (" (the simulator: not a timing)" if sim else ""))
+    print(f"{'variant':<9} {'median /s':>10} {'/ base':>7}  rounds' ratios        registers local  E equal")
+    base = rows["base"]
+    names = [v for v in names if v not in skipped]
+    for v in names:
+        row = rows[v]
+        ratios = [a / b for a, b in zip(row["round_medians"], base["round_medians"])]
+        row["ratio"] = statistics.median(ratios)
+        same = "-" if v not in EXACT else ("yes" if row["mean"] == base["mean"] else "NO")
+        res = f"{row.get('registers_per_thread', '-'):>9} {row.get('local_bytes_per_thread', '-'):>5}"
+        print(f"{v:<9} {statistics.median(row['rates']):10.3g} {row['ratio']:7.2f}  "
+              f"{' '.join(f'{x:.2f}' for x in ratios):<21} {res}  {same}")
+    bad = [v for v in names if v in EXACT and rows[v]["mean"] != base["mean"]]
+    if bad:
+        raise SystemExit(f"gpu_ablation: the rewrites {bad} changed the numbers")
+    for v, why in skipped.items():
+        rows[v] = {"skipped": why}
+    return rows
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
+    ap.add_argument("--models", default="Example 1", help="one model of gpu_throughput.py's automaton_models")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help=f"separated by ',' from: {', '.join(VARIANTS)}")
+    ap.add_argument("--precision", default="f64", choices=("f64", "f32"))
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--timings", type=int, default=1, help="timed runs per variant and round")
+    ap.add_argument("--paths", type=int, default=2**20)
+    ap.add_argument("--steps", type=int, default=20_000)
+    ap.add_argument("--quick", action="store_true", help="64 paths x 51 steps, one round (for the simulator)")
+    ap.add_argument("--ncu", metavar="VARIANT", help="one launch of one variant, nothing timed (run it under ncu)")
+    ap.add_argument("--json", metavar="FILE", help="write the rows")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.paths, args.steps, args.rounds = 64, 51, 1
+    if args.ncu and args.ncu not in VARIANTS:
+        ap.error(f"--ncu {args.ncu}: choose one of {', '.join(VARIANTS)}")
+    if not _auto_cuda.simulator_enabled():
+        try:
+            _auto_cuda.require_cuda()
+            from numba import cuda
+
+            cuda.get_current_device()
+        except Exception as exc:  # no GPU: one line
+            raise SystemExit(f"gpu_ablation: no GPU ({type(exc).__name__}: {str(exc).splitlines()[0][:120]}); "
+                             "NUMBA_ENABLE_CUDASIM=1 NUMBA_DISABLE_JIT=1 runs it on the simulator") from None
+    rows = run(args)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
