@@ -240,7 +240,7 @@ def run(args) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return simulate_automaton(automaton, scheme, dt=DT, paths=paths, t_end=steps * DT, t_burn=0.0, seed=1,
-                                      check_dt=False, scheduler="cuda", threads_per_block=128,
+                                      check_dt=False, scheduler="cuda", threads_per_block=args.threads_per_block,
                                       precision=args.precision, **kw)
 
     if args.ncu:
@@ -284,7 +284,8 @@ def run(args) -> dict:
     finally:
         _auto_cuda.generate_cuda_source = original_source
         _cuda_rng._DEVICE[args.precision] = original_pair
-    print(f"\n{args.models}, {args.precision}, {args.paths} paths x {args.steps} steps"
+    print(f"\n{args.models}, {args.precision}, {args.paths} paths x {args.steps} steps, "
+          f"{args.threads_per_block} threads per block"
           + (" (the simulator: not a timing)" if sim else ""))
     print(f"{'variant':<9} {'median /s':>10} {'/ base':>7}  rounds' ratios        registers local  E equal")
     base = rows["base"]
@@ -314,12 +315,14 @@ def main(argv=None) -> dict:
     ap.add_argument("--timings", type=int, default=1, help="timed runs per variant and round")
     ap.add_argument("--paths", type=int, default=2**20)
     ap.add_argument("--steps", type=int, default=20_000)
-    ap.add_argument("--quick", action="store_true", help="64 paths x 51 steps, one round (for the simulator)")
+    ap.add_argument("--threads-per-block", type=int, default=128)
+    ap.add_argument("--quick", action="store_true",
+                    help="64 paths x 51 steps, 32 threads per block, one round (for the simulator)")
     ap.add_argument("--ncu", metavar="VARIANT", help="one launch of one variant, nothing timed (run it under ncu)")
     ap.add_argument("--json", metavar="FILE", help="write the rows")
     args = ap.parse_args(argv)
     if args.quick:
-        args.paths, args.steps, args.rounds = 64, 51, 1
+        args.paths, args.steps, args.rounds, args.threads_per_block = 64, 51, 1, 32
     if args.ncu and args.ncu not in VARIANTS:
         ap.error(f"--ncu {args.ncu}: choose one of {', '.join(VARIANTS)}")
     if not _auto_cuda.simulator_enabled():

@@ -367,3 +367,20 @@ def test_automaton_kernel_compiles_to_ptx_for_the_h100():
     ptx = _auto_cuda.compile_ptx(automaton, "splitting", dict(automaton.observables), phases=4)
     ops = set(re.findall(r"^\s+([a-z][\w.]*)", ptx, re.M))
     assert {"atom.shared.add.u32", "atom.global.add.u64", "bar.sync", "fma.rn.f64"} <= ops
+
+
+@needs_sim
+@pytest.mark.slow
+def test_gpu_ablation_rewrites_keep_the_numbers_on_the_simulator():
+    """benchmarks/gpu_ablation.py's rewrites still fit the generated source and give the kernel's own numbers
+    (the script refuses otherwise); the ablations run. Example 1 (one noise) and the impact pair (two), tiny: 30 s
+    to 4 min on 2 cores (the simulator's threads sometimes crawl)."""
+    for model in ("Example 1", "impact pair"):
+        r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "gpu_ablation.py"), "--quick", "--models", model],
+                           cwd=ROOT, env=_env(NUMBA_ENABLE_CUDASIM="1", NUMBA_DISABLE_JIT="1"), capture_output=True,
+                           text=True, timeout=900)
+        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+        table = r.stdout.split("E equal")[-1].splitlines()[1:]
+        exact = [line.split()[0] for line in table if line.split() and line.split()[-1] in ("yes", "NO")]
+        assert "combo" in exact and all(line.split()[-1] != "NO" for line in table if line.split()), r.stdout
+        assert ("unroll2" in exact) == (model == "Example 1"), r.stdout  # two steps per draw: one noise only
