@@ -26,7 +26,8 @@ unchanged kernel (``base``) in every round: per variant it prints the path-steps
 20,000 steps of dt = 1e-3 from rest, compilation excluded) and the median over rounds of its ratio to base's
 median in the same round. Only such ratios compare: the H100s lent to this project drifted by up to 15 % within
 one such run. The models are those of ``gpu_throughput.py --automata``. A rewrite assumes the text the current
-template generates; where the template has changed, the variant stops with a message naming what it missed.
+template generates; where it does not fit (the template has changed, or the model has another number of noises),
+the variant is skipped with a line naming the text it missed.
 """
 
 from __future__ import annotations
