@@ -53,7 +53,7 @@ def _env(**extra):
 
 @pytest.fixture(scope="module")
 def sim(tmp_path_factory):
-    """The output folder of one run of tests/auto_cuda_sim_runs.py on the simulator (about 30 s on 2 cores)."""
+    """The output folder of one run of tests/auto_cuda_sim_runs.py on the simulator (about 20 s on 2 cores)."""
     out = tmp_path_factory.mktemp("autocudasim")
     # VIBRO_CUDA_ON_DEVICE=1 runs the same checks on a real GPU (and the CPU references compiled)
     on_device = os.environ.get("VIBRO_CUDA_ON_DEVICE") == "1"

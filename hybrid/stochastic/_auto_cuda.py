@@ -405,6 +405,19 @@ def _after_launch(n_done: int) -> None:
     """Called after each launch has finished (a test interrupts a run here)."""
 
 
+def _plain_device_functions(module) -> None:
+    """On numba's simulator: each device function of the device module replaced by the Python function it wraps.
+
+    The simulator swaps the name ``cuda`` in a device function's globals, under a lock, at every call. The
+    kernel's launch has swapped it already for the whole module, whose functions share its globals, so those swaps
+    only take the lock. With 32 threads contending for it at every call, a run sometimes crawled (1 s became up to
+    150 s). The same functions run, so the numbers do not change.
+    """
+    for name, obj in list(vars(module).items()):
+        if getattr(obj, "_device", False) is True and callable(getattr(obj, "fn", None)):
+            setattr(module, name, obj.fn)
+
+
 class CudaRun:
     """The device module of one automaton run and the per-path state it advances (one row per path).
 
@@ -439,6 +452,8 @@ class CudaRun:
         where = ("sim" if sim else "dev") + ("_rec" if self.RECORD else "")
         self.name = f"vibro_auto_cuda_{scheme}_{precision}_{where}_{_auto_codegen.kernel_key(src)}"
         self.module, _ = _kernel_modules.load_source(self.name, src, label=f"automaton/{scheme} (CUDA, {precision})")
+        if sim:
+            _plain_device_functions(self.module)
         self.key = _cuda_rng.seed_key(seed)
         self.round_keys = _cuda_rng.round_keys(*self.key)  # launch arguments: read from the constant bank
         ft = self.ft

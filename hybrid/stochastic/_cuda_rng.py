@@ -181,20 +181,24 @@ def device_normal_pair(precision: str):
         from numba.core import config
 
         single = precision == "f32"
+        if config.ENABLE_CUDASIM:
+            # no libdevice there: the host's arithmetic. Plain Python functions, not device functions: the
+            # simulator takes a lock at every device function's call, and 32 threads contending for it at each
+            # Philox round sometimes crawled (a run of 1 s took up to 150 s)
+            _DEVICE[precision] = _make_normal_pair(_philox_keyed, single, _sincos_2pi_f32 if single else _sincos_2pi)
+            return _DEVICE[precision]
+        from numba.cuda import libdevice
+
         device = cuda.jit(device=True, inline=True)
         rnd = device(_philox_round)
         philox = device(_make_philox(rnd))
-        if config.ENABLE_CUDASIM:  # no libdevice there: the host's arithmetic
-            sincos = device(_sincos_2pi_f32 if single else _sincos_2pi)
-        else:  # sincospi: no range reduction of 2 pi u, both values at once (the same to rounding as the host's)
-            from numba.cuda import libdevice
+        # sincospi: no range reduction of 2 pi u, both values at once (the same to rounding as the host's)
+        sincospi = libdevice.sincospif if single else libdevice.sincospi
+        two = np.float32(2.0) if single else 2.0
 
-            sincospi = libdevice.sincospif if single else libdevice.sincospi
-            two = np.float32(2.0) if single else 2.0
+        def sincos_2pi(u):
+            return sincospi(two * u)
 
-            def sincos_2pi(u):
-                return sincospi(two * u)
-
-            sincos = device(sincos_2pi)
+        sincos = device(sincos_2pi)
         _DEVICE[precision] = device(_make_normal_pair(philox, single, sincos))
     return _DEVICE[precision]
