@@ -10,30 +10,37 @@
 Each variant is the device module of ``simulate_automaton(..., scheduler="cuda")`` with one change made to its
 text (or, for ``nobm``, to the normal generator it imports), compiled under its own module name. Two kinds:
 
-* **ablations** cut a piece out, to price it; their numbers are wrong on purpose (``norng``: a multiplicative hash
-  in place of Philox and Box-Muller; ``nobm``: Philox with uniforms in place of Box-Muller; ``nostats``: no
-  statistics at all; ``nohist``: no histogram increment). ``nobook`` keeps only the bookkeeping this benchmark's
-  runs need (no burn-in, every step a sample, no phase sections), so its numbers are the kernel's.
-* **rewrites** do the same arithmetic in another shape and must give the kernel's numbers to the last digit
-  (checked: E[observable] is compared with the unchanged kernel's): ``lazyt`` (the step's times computed only where
-  the event code needs them), ``i32bin`` (32-bit histogram cells, straight into the block's shared copy),
-  ``i32loop`` (a 32-bit step counter), ``parity`` (a toggled parity instead of the 64-bit pair test), ``unroll2``
-  (two steps per loop pass, one Philox call at its head), ``ahead`` (as unroll2, drawing the next pair's normals a
-  pass early, so that they do not wait on the state), ``combo`` (lazyt + i32bin + i32loop + parity).
+* **ablations** cut a piece out, to price it; their numbers are wrong on purpose. ``norng``: uniforms of variance 1
+  from a splitmix64 hash of (pair, path) in place of Philox and Box-Muller; ``nobm``: Philox's words as such
+  uniforms, without Box-Muller. These two keep the noise's mean and variance, so E[observable] should stay close
+  to the kernel's (printed, in the kernel's intervals). ``nostats``: no statistics at all; ``nohist``: no histogram
+  increment. ``nobook`` keeps only the bookkeeping this benchmark's runs need (no burn-in, every step a sample):
+  its numbers are the kernel's on a model without phase sections.
+* **rewrites** do the same arithmetic in another shape and must give the kernel's numbers exactly (checked: the
+  observable's histogram and its mean to full precision): ``lazyt`` (the step's times computed only where the
+  event code needs them), ``i32bin`` (the observables' cells straight into the block's shared copy, without
+  ``count()``'s test of where a cell lies, from a 32-bit bin), ``i32loop`` (a 32-bit step counter), ``parity`` (a
+  toggled parity instead of the 64-bit pair test), ``unroll2`` (two steps per loop pass, one Philox call at its
+  head), ``ahead`` (as unroll2, drawing the next pair's normals a pass early, so that they do not wait on the
+  state), ``combo`` (lazyt + i32bin + parity + i32loop).
 
 All variants of a model run in one process on one warm device, in rounds whose order alternates, with the
 unchanged kernel (``base``) in every round: per variant it prints the path-steps/s of each timing (2**20 paths x
-20,000 steps of dt = 1e-3 from rest, compilation excluded) and the median over rounds of its ratio to base's
-median in the same round. Only such ratios compare: the H100s lent to this project drifted by up to 15 % within
-one such run. The models are those of ``gpu_throughput.py --automata``. A rewrite assumes the text the current
-template generates; where it does not fit (the template has changed, or the model has another number of noises),
-the variant is skipped with a line naming the text it missed.
+20,000 steps of dt = 1e-3 from rest, compilation excluded) and the mean over rounds of its ratio to base's median
+in the same round (an even number of rounds, so that a steady drift cancels). Only such ratios compare: the
+H100s lent to this project drifted by up to 15 % within one such run. The models are those of
+``gpu_throughput.py --automata``. A rewrite assumes the text the current template generates; where it does not fit
+(the template has changed, or the model has another number of noises), the variant is skipped with a line naming
+the text it missed.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import inspect
 import json
+import math
 import re
 import statistics
 import sys
@@ -53,7 +60,8 @@ from hybrid.stochastic import _auto_cuda, _cuda_rng, simulate_automaton  # noqa:
 
 
 class TemplateChanged(SystemExit):
-    """A rewrite did not find the text it changes."""
+    """A rewrite did not find the text it changes (a SystemExit, so that no ``except Exception`` on the way out of
+    ``simulate_automaton`` turns it into another error)."""
 
 
 def _need(src: str, *pieces: str) -> None:
@@ -65,7 +73,6 @@ def _need(src: str, *pieces: str) -> None:
 
 # the generated text the variants change (the kernel template of hybrid/stochastic/_auto_cuda.py)
 _LOOP = "        for step in range(n0, n1):  # body indented as the CPU lane loop, for its pieces\n"
-_INIT_AT = "        _nsamp = np.int64(0)"
 _BOOK = """                phase_now = False
                 sample = False
                 if rec:
@@ -100,15 +107,24 @@ _HIST = re.compile(r"count\(sh, gh, H_OFF \+ (\d+) \* WIDTH \+ (np\.int64\(_b\) 
 
 
 def norng(src):
+    # splitmix64's finaliser of (pair, path): two independent-looking 32-bit halves, as uniforms of variance 1
     _need(src, _DRAW)
-    cheap = ("_hh = (_zp * np.uint64(6364136223846793005) + np.uint64(ip) * np.uint64(1442695040888963407)) "
-             ">> np.uint64(11)\n" + " " * 20 + "_za = _fty(_hh) * _fty(3.8459253727671276e-16) - _fty(1.7320508)\n"
-             + " " * 20 + "_zb = _fty(1.7320508) - _fty(_hh & np.uint64(0xFFFFF)) * _fty(3.3e-6)")
-    return src.replace(_DRAW, cheap)
+    ind = "\n" + " " * 20
+    cheap = ind.join([
+        "_hh = _zp * np.uint64(0x9E3779B97F4A7C15) + np.uint64(ip) * np.uint64(0xD1B54A32D192ED03)",
+        "_hh = (_hh ^ (_hh >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)",
+        "_hh = (_hh ^ (_hh >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)",
+        "_hh = _hh ^ (_hh >> np.uint64(31))",
+        "_za = _fty(_hh >> np.uint64(32)) * _fty(8.065872858567445e-10) - _fty(1.7320508075688772)",
+        "_zb = _fty(_hh & np.uint64(0xFFFFFFFF)) * _fty(8.065872858567445e-10) - _fty(1.7320508075688772)"])
+    return src.replace(_DRAW, cheap.lstrip())
 
 
-def nobm(src):  # the source is unchanged but for this line: its own module; the generator is swapped in run()
-    return src + "\n# gpu_ablation variant nobm: Philox without Box-Muller\n"
+def nobm(src):
+    # the source is unchanged but for this line: its own module and cache entry, tied to the generator that run()
+    # swaps in (numba's disk cache would not see an edit of _philox_uniforms)
+    digest = hashlib.sha256(inspect.getsource(_philox_uniforms).encode()).hexdigest()[:16]
+    return src + f"\n# gpu_ablation variant nobm: Philox without Box-Muller ({digest})\n"
 
 
 def nostats(src):
@@ -137,7 +153,10 @@ def lazyt(src):
 
 
 def i32bin(src):
-    consts = {k: int(re.search(rf"^{k} = (\d+)", src, re.M).group(1)) for k in ("SH", "H_OFF", "WIDTH", "N_OBS")}
+    found = {k: re.search(rf"^{k} = (\d+)", src, re.M) for k in ("SH", "H_OFF", "WIDTH", "N_OBS")}
+    if not all(found.values()):
+        raise TemplateChanged("gpu_ablation: i32bin: the module's layout constants are not where they were")
+    consts = {k: int(m.group(1)) for k, m in found.items()}
     if consts["H_OFF"] + consts["N_OBS"] * consts["WIDTH"] > consts["SH"] or not _HIST.search(src):
         raise TemplateChanged("gpu_ablation: i32bin: the observables' cells are not all in the shared copy")
     return _HIST.sub(lambda m: f"cuda.atomic.add(sh, H_OFF + {m.group(1)} * WIDTH + "
@@ -158,12 +177,14 @@ def parity(src):
                     _w0 = sdt * _zb
                 _odd ^= 1
 """
+        # just before the loop, after the template has set _za, _zb: a launch that starts at an odd step needs the
+        # pair of the step before
         init = """        _odd = np.int32(n0 & 1)
         if _odd == 1:
             _za, _zb = normal_pair(rk, ip, np.uint64(n0) >> np.uint64(1))
 """
-        _need(src, _INIT_AT)
-        return src.replace(_DRAW1, draw).replace(_INIT_AT, init + _INIT_AT)
+        _need(src, _LOOP)
+        return src.replace(_DRAW1, draw).replace(_LOOP, init + _LOOP)
     _need(src, _DRAW2)  # two noises: one pair per step
     return src.replace(_DRAW2, "                _za, _zb = normal_pair(rk, ip, np.uint64(step))\n"
                                "                _w0 = sdt * _za\n                _w1 = sdt * _zb\n")
@@ -194,21 +215,24 @@ def ahead(src):
 
 
 def combo(src):
-    return parity(i32loop(i32bin(lazyt(src))))
+    return i32loop(parity(i32bin(lazyt(src))))  # parity first: it inserts its preload before the loop's line
 
 
 VARIANTS = {"base": lambda src: src, "norng": norng, "nobm": nobm, "nostats": nostats, "nohist": nohist,
             "nobook": nobook, "lazyt": lazyt, "i32bin": i32bin, "i32loop": i32loop, "parity": parity,
             "unroll2": unroll2, "ahead": ahead, "combo": combo}
 EXACT = ("nobook", "lazyt", "i32bin", "i32loop", "parity", "unroll2", "ahead", "combo")
-"""The variants that must give the unchanged kernel's numbers (on these runs: no burn-in, stride 1, no phases)."""
+"""The variants that must give the unchanged kernel's numbers (nobook: on these runs, without phase sections)."""
+NEAR = ("norng", "nobm")
+"""Ablations that keep the noise's mean and variance: E[observable] near the kernel's (not checked, printed)."""
 
 
 def _philox_uniforms(precision):
     """A device ``normal_pair`` that returns two Philox words as uniforms of variance 1 (no Box-Muller)."""
     from numba import cuda
 
-    device = cuda.jit(device=True, inline=True)
+    # on the simulator plain functions, as _cuda_rng's own (device functions take a lock at every call there)
+    device = (lambda f: f) if _auto_cuda.simulator_enabled() else cuda.jit(device=True, inline=True)
     philox = device(_cuda_rng._make_philox(device(_cuda_rng._philox_round)))
     mask, s32 = _cuda_rng._MASK, _cuda_rng._S32
     ft = np.float32 if precision == "f32" else np.float64
@@ -242,13 +266,18 @@ def run(args) -> dict:
             warnings.simplefilter("ignore")
             return simulate_automaton(automaton, scheme, dt=DT, paths=paths, t_end=steps * DT, t_burn=0.0, seed=1,
                                       check_dt=False, scheduler="cuda", threads_per_block=args.threads_per_block,
-                                      precision=args.precision, **kw)
+                                      launch_steps=args.launch_steps, precision=args.precision, **kw)
+
+    def numbers(g):  # what a rewrite must leave unchanged: the first observable's histogram and mean, all bits
+        name = g.names[0]
+        return repr(float(g.mean(name).value)), np.asarray(g.counts[name]).tobytes()
 
     if args.ncu:
         use(args.ncu)
         g = ensemble(2**17, 2000)
         print(f"{args.ncu}: one launch, {g.settings['device_seconds']:.3f} s")
         return {}
+    exact = tuple(v for v in EXACT if not (v == "nobook" and kw.get("phases")))
     names = ["base"] + [v for v in args.variants.split(",") if v != "base"]
     unknown = [v for v in names if v not in VARIANTS]
     if unknown:
@@ -278,6 +307,8 @@ def run(args) -> dict:
                 row["rates"] += rates
                 row["round_medians"].append(statistics.median(rates))
                 row["mean"] = str(g.mean(g.names[0]))
+                row["estimate"] = g.mean(g.names[0])
+                row["numbers"] = numbers(g)
                 if not sim:
                     row.update(_auto_cuda.kernel_resources(g.settings))
                 print(f"round {r + 1} {v:<8} {' '.join(f'{x:.3g}' for x in rates)} path-steps/s; "
@@ -288,22 +319,33 @@ def run(args) -> dict:
     print(f"\n{args.models}, {args.precision}, {args.paths} paths x {args.steps} steps, "
           f"{args.threads_per_block} threads per block"
           + (" (the simulator: not a timing)" if sim else ""))
-    print(f"{'variant':<9} {'median /s':>10} {'/ base':>7}  rounds' ratios        registers local  E equal")
+    print(f"{'variant':<9} {'median /s':>10} {'/ base':>7}  rounds' ratios        registers local  numbers")
     base = rows["base"]
     names = [v for v in names if v not in skipped]
     for v in names:
         row = rows[v]
         ratios = [a / b for a, b in zip(row["round_medians"], base["round_medians"])]
-        row["ratio"] = statistics.median(ratios)
-        same = "-" if v not in EXACT else ("yes" if row["mean"] == base["mean"] else "NO")
+        row["ratio"] = statistics.mean(ratios)
+        if v in exact:
+            same = "same" if row["numbers"] == base["numbers"] else "CHANGED"
+        elif v in NEAR:
+            e, b = row["estimate"], base["estimate"]
+            width = math.hypot(e.ci, b.ci)
+            k = abs(e.value - b.value) / width if math.isfinite(width) and width > 0 else math.inf
+            same = f"E {k:.1f} CIs off"
+        else:
+            same = "-"
         res = f"{row.get('registers_per_thread', '-'):>9} {row.get('local_bytes_per_thread', '-'):>5}"
         print(f"{v:<9} {statistics.median(row['rates']):10.3g} {row['ratio']:7.2f}  "
               f"{' '.join(f'{x:.2f}' for x in ratios):<21} {res}  {same}")
-    bad = [v for v in names if v in EXACT and rows[v]["mean"] != base["mean"]]
+    bad = [v for v in names if v in exact and rows[v]["numbers"] != base["numbers"]]
     if bad:
         raise SystemExit(f"gpu_ablation: the rewrites {bad} changed the numbers")
     for v, why in skipped.items():
         rows[v] = {"skipped": why}
+    for row in rows.values():  # for --json
+        row.pop("numbers", None)
+        row.pop("estimate", None)
     return rows
 
 
@@ -312,18 +354,21 @@ def main(argv=None) -> dict:
     ap.add_argument("--models", default="Example 1", help="one model of gpu_throughput.py's automaton_models")
     ap.add_argument("--variants", default=",".join(VARIANTS), help=f"separated by ',' from: {', '.join(VARIANTS)}")
     ap.add_argument("--precision", default="f64", choices=("f64", "f32"))
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=2, help="an even number: a steady drift cancels in the mean")
     ap.add_argument("--timings", type=int, default=1, help="timed runs per variant and round")
     ap.add_argument("--paths", type=int, default=2**20)
     ap.add_argument("--steps", type=int, default=20_000)
     ap.add_argument("--threads-per-block", type=int, default=128)
+    ap.add_argument("--launch-steps", type=int, help="steps per launch (default: the scheduler's)")
     ap.add_argument("--quick", action="store_true",
-                    help="64 paths x 51 steps, 32 threads per block, one round (for the simulator)")
+                    help="64 paths x 51 steps in launches of 7, 32 threads per block, 2 rounds (for the simulator)")
     ap.add_argument("--ncu", metavar="VARIANT", help="one launch of one variant, nothing timed (run it under ncu)")
     ap.add_argument("--json", metavar="FILE", help="write the rows")
     args = ap.parse_args(argv)
     if args.quick:
-        args.paths, args.steps, args.rounds, args.threads_per_block = 64, 51, 1, 32
+        args.paths, args.steps, args.rounds, args.threads_per_block, args.launch_steps = 64, 51, 2, 32, 7
+    if args.rounds % 2:
+        print(f"gpu_ablation: {args.rounds} rounds: a steady drift does not cancel in an odd number", file=sys.stderr)
     if args.ncu and args.ncu not in VARIANTS:
         ap.error(f"--ncu {args.ncu}: choose one of {', '.join(VARIANTS)}")
     if not _auto_cuda.simulator_enabled():
