@@ -408,10 +408,10 @@ def _after_launch(n_done: int) -> None:
 def _plain_device_functions(module) -> None:
     """On numba's simulator: each device function of the device module replaced by the Python function it wraps.
 
-    The simulator swaps the name ``cuda`` in a device function's globals, under a lock, at every call. The
-    kernel's launch has swapped it already for the whole module, whose functions share its globals, so those swaps
-    only take the lock. With 32 threads contending for it at every call, a run sometimes crawled (1 s became up to
-    150 s). The same functions run, so the numbers do not change.
+    At every call of a device function the simulator takes two locks, to count the calls that need the name
+    ``cuda`` swapped in the function's globals. The kernel's launch has swapped it already for the whole module,
+    whose functions share its globals, so those calls only take the locks. With 32 threads contending for them, a
+    run sometimes crawled (1 s became up to 150 s). The same functions run, so the numbers do not change.
     """
     for name, obj in list(vars(module).items()):
         if getattr(obj, "_device", False) is True and callable(getattr(obj, "fn", None)):

@@ -172,7 +172,7 @@ _DEVICE: dict = {}
 
 def device_normal_pair(precision: str):
     """The CUDA device function ``normal_pair(rk, path, pair)`` (``rk``: :func:`round_keys`) for ``precision``
-    ('f64' or 'f32').
+    ('f64' or 'f32'); on numba's simulator the plain Python function, the host's.
 
     Built on first use, so that importing this module (doctests, CI without numba-cuda) needs no ``numba.cuda``.
     """
@@ -183,8 +183,8 @@ def device_normal_pair(precision: str):
         single = precision == "f32"
         if config.ENABLE_CUDASIM:
             # no libdevice there: the host's arithmetic. Plain Python functions, not device functions: the
-            # simulator takes a lock at every device function's call, and 32 threads contending for it at each
-            # Philox round sometimes crawled (a run of 1 s took up to 150 s)
+            # simulator takes two locks at every device function's call, and 32 threads contending for them at
+            # each Philox round sometimes crawled (a run of 1 s took up to 150 s)
             _DEVICE[precision] = _make_normal_pair(_philox_keyed, single, _sincos_2pi_f32 if single else _sincos_2pi)
             return _DEVICE[precision]
         from numba.cuda import libdevice
