@@ -332,7 +332,7 @@ def run(args) -> dict:
             e, b = row["estimate"], base["estimate"]
             width = math.hypot(e.ci, b.ci)
             k = abs(e.value - b.value) / width if math.isfinite(width) and width > 0 else math.inf
-            same = f"E {k:.1f} CIs off"
+            same = f"E {k:.2f} CIs off"
         else:
             same = "-"
         res = f"{row.get('registers_per_thread', '-'):>9} {row.get('local_bytes_per_thread', '-'):>5}"
@@ -378,8 +378,8 @@ def main(argv=None) -> dict:
 
             cuda.get_current_device()
         except Exception as exc:  # no GPU: one line
-            raise SystemExit(f"gpu_ablation: no GPU ({type(exc).__name__}: {str(exc).splitlines()[0][:120]}); "
-                             "NUMBA_ENABLE_CUDASIM=1 NUMBA_DISABLE_JIT=1 runs it on the simulator") from None
+            raise SystemExit(f"gpu_ablation: no GPU: {str(exc).splitlines()[0]} (NUMBA_ENABLE_CUDASIM=1 "
+                             "NUMBA_DISABLE_JIT=1 runs it on the simulator)") from None
     rows = run(args)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
