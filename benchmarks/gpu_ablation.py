@@ -378,8 +378,9 @@ def main(argv=None) -> dict:
 
             cuda.get_current_device()
         except Exception as exc:  # no GPU: one line
-            raise SystemExit(f"gpu_ablation: no GPU: {str(exc).splitlines()[0]} (NUMBA_ENABLE_CUDASIM=1 "
-                             "NUMBA_DISABLE_JIT=1 runs it on the simulator)") from None
+            print(f"gpu_ablation: no GPU: {str(exc).splitlines()[0]} (NUMBA_ENABLE_CUDASIM=1 NUMBA_DISABLE_JIT=1 "
+                  "runs it on the simulator)", file=sys.stderr)
+            raise SystemExit(2) from None
     rows = run(args)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
