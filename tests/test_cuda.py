@@ -77,7 +77,7 @@ MOMENTS = ("mean_energy", "mean_x2", "mean_y2", "prob_below_barrier", "impact_ra
 
 
 # ---------------------------------------------------------------------------------------------------- simulator
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 @pytest.mark.parametrize("scheme, run", [("splitting", "tpb32"), ("milstein", "milstein")])
 def test_cuda_statistics_agree_with_the_cpu_kernel_within_the_intervals(sim, scheme, run):
@@ -93,7 +93,7 @@ def test_cuda_statistics_agree_with_the_cpu_kernel_within_the_intervals(sim, sch
         assert abs(g.value - c.value) <= math.hypot(g.ci, c.ci), (name, g, c)
 
 
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 def test_cuda_kernel_follows_the_cpu_trajectories_for_the_same_normals(sim):
     """The device module is the automaton generator's step code: fed the Philox normals of paths 0..7, the CPU
@@ -110,7 +110,7 @@ def test_cuda_kernel_follows_the_cpu_trajectories_for_the_same_normals(sim):
     np.testing.assert_allclose(end[:, 1], ys[:8], rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 def test_cuda_numbers_do_not_depend_on_the_launch_configuration(sim):
     """32 threads per block and whole-run launches vs 64 threads and launches of 37 steps (odd starts)."""
@@ -118,7 +118,7 @@ def test_cuda_numbers_do_not_depend_on_the_launch_configuration(sim):
     _same(sim["tpb32"], sim["tpb64"])
 
 
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 def test_cuda_stride_across_launches(sim):
     a, b = sim["stride3"], sim["stride3_split"]
@@ -126,14 +126,14 @@ def test_cuda_stride_across_launches(sim):
     _same(a, b)
 
 
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 def test_cuda_resume_after_an_interruption_gives_the_uninterrupted_numbers(sim):
     assert sim["partial_steps"] == 50  # interrupted after launch 2 of 8, before its checkpoint
     _same(sim["tpb32"], sim["resumed"])
 
 
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 def test_cuda_barrier_invariant(sim):
     """|x| <= delta = 1: no step ended outside (counter), no sample in the x-bins beyond the walls (the histogram
@@ -148,7 +148,7 @@ def test_cuda_barrier_invariant(sim):
         assert np.all(np.abs(d["XS"][:, 0]) <= 1.0)
 
 
-@pytest.mark.slow  # one simulator run of about 20 s (before the fix of 27 November its threads crawled: up to 10 min)
+@pytest.mark.slow  # one simulator run of about 20 s, kept out of the default suite (its 6-minute budget)
 @needs_sim
 def test_cuda_f32_is_close_to_f64(sim):
     """Single precision draws the same Philox words: p(H) and the moments move far less than their intervals."""
