@@ -1,6 +1,6 @@
 """What the pieces of the automaton CUDA kernel cost: variants of its generated source, timed in one process.
 
-    python benchmarks/gpu_ablation.py                                  # Example 1, every variant, 3 rounds
+    python benchmarks/gpu_ablation.py                                  # Example 1, every variant, 2 rounds
     python benchmarks/gpu_ablation.py --models "impact pair" --variants norng,nobook,combo
     python benchmarks/gpu_ablation.py --ncu combo    # one launch of 2**17 x 2000 steps of one variant, for ncu:
     ncu -k regex:advance --launch-count 1 --section SourceCounters -o combo \
