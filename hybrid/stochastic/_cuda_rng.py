@@ -177,16 +177,16 @@ def device_normal_pair(precision: str):
     Built on first use, so that importing this module (doctests, CI without numba-cuda) needs no ``numba.cuda``.
     """
     if precision not in _DEVICE:
-        from numba import cuda
         from numba.core import config
 
         single = precision == "f32"
         if config.ENABLE_CUDASIM:
-            # no libdevice there: the host's arithmetic. Plain Python functions, not device functions: the
-            # simulator takes two locks at every device function's call, and 32 threads contending for them at
-            # each Philox round sometimes crawled (a run of 1 s took up to 150 s)
-            _DEVICE[precision] = _make_normal_pair(_philox_keyed, single, _sincos_2pi_f32 if single else _sincos_2pi)
+            # no libdevice there: the host's own functions. Plain Python, not device functions: the simulator
+            # takes two locks at every device function's call, and 32 threads contending for them at each Philox
+            # round sometimes crawled (a run of 1 s took up to 150 s)
+            _DEVICE[precision] = _normal_pair_f32 if single else _normal_pair_f64
             return _DEVICE[precision]
+        from numba import cuda
         from numba.cuda import libdevice
 
         device = cuda.jit(device=True, inline=True)
