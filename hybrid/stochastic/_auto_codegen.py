@@ -658,7 +658,8 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     to_ol = [f"OL[{o}, _l] = _ob{o}" for o in range(len(names))]
     if len(binned) == len(kept):  # every kept observable has a histogram: one loop, sums in registers
         checks = SAMPLE_CHECKS.format(to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
-                                      binning=ind(_binning(names, summed, joint_only), " " * 16),
+                                      binning=ind(_binning(names, summed, joint_only).replace(
+                                          "np.int64(_b) + 1", "np.uint64(_b) + BIN1"), " " * 16),
                                       to_ob=ind("\n".join(to_ol) or "pass", " " * 20))
         return dict(sample_statistics="\n".join(["            for _l in range(nl):", load, observe,
                                                   "                _nsamp += 1", checks.rstrip("\n")]),
@@ -668,7 +669,7 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     lane.append("NL[0, _l] += " + " + ".join(f"(1.0 if _ob{o} != _ob{o} else 0.0)" for o in kept))
     scatter = []
     for o in binned:
-        scatter += [f"_b = BL[{o}, _l]", f"if _b >= 0.0 and _b < _nb{o}:", f"    hist[{o}, np.int64(_b) + 1] += 1",
+        scatter += [f"_b = BL[{o}, _l]", f"if _b >= 0.0 and _b < _nb{o}:", f"    hist[{o}, np.uint64(_b) + BIN1] += 1",
                     "elif _b < 0.0:", f"    hist[{o}, 0] += 1", "elif _b == _b:", f"    hist[{o}, _nb{o} + 1] += 1"]
     text = ["for _l in range(nl):", load, observe, ind("\n".join(lane), " " * 4), "_nsamp += nl"]
     text = [ind(t, " " * 12) if k in (0, 3, 4) else t for k, t in enumerate(text)]
@@ -1156,6 +1157,10 @@ def outside(mode, x, t, p):
 
 '''
 _TEMPLATE_CHUNK = '''\
+# an unsigned bin index: numba adds no test for a negative index (a uint64 constant: numba freezes it)
+BIN1 = np.uint64(1)
+
+
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
@@ -1215,7 +1220,7 @@ def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, z
                     bx = (OL[jx, _l] - j_lo[0]) * j_scale[0]
                     by = (OL[jy, _l] - j_lo[1]) * j_scale[1]
                     if bx >= 0.0 and bx < j_bins[0] and by >= 0.0 and by < j_bins[1]:
-                        jhist[np.int64(by), np.int64(bx)] += 1
+                        jhist[np.uint64(by), np.uint64(bx)] += 1
                     else:
                         counts[4] += 1
     counts[0] += _nsamp
