@@ -647,10 +647,11 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     Where an observable is only summed (the oscillator front end's x**2, y**2, ...), the lanes' observables, bin
     coordinates, sums and NaN counts go into per-lane arrays (``BL``, ``SM``, ``NL``) in a loop with no call and no
     branch, which runs on vectors of lanes, and the histograms' increments follow in a loop of their own: Example 1
-    ran 1.17-1.19x faster. Where every observable has a histogram, one loop bins and sums each lane at once, as on
-    the GPU (:func:`_binning`; the two loops ran 0.92x as fast on a forced model with one observable). Either way a
-    NaN observable is counted, not summed or binned, and an infinite one falls in the underflow or overflow bin and
-    is summed.
+    ran 1.17-1.19x faster. Each lane's sums join the chunk's at its end, so they round differently from the other
+    variant's. Where every observable has a histogram, one loop bins and sums each lane at once, as on the GPU
+    (:func:`_binning`; the two loops ran 0.92x as fast on a forced model with one observable). Either way a NaN
+    observable is counted, not summed or binned, and an infinite one falls in the underflow or overflow bin and is
+    summed.
     """
     ind = textwrap.indent
     kept = [o for o, name in enumerate(names) if name not in joint_only]
@@ -658,8 +659,8 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     to_ol = [f"OL[{o}, _l] = _ob{o}" for o in range(len(names))]
     if len(binned) == len(kept):  # every kept observable has a histogram: one loop, sums in registers
         checks = SAMPLE_CHECKS.format(to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
-                                      binning=ind(_binning(names, summed, joint_only).replace(
-                                          "np.int64(_b) + 1", "np.uint64(_b) + BIN1"), " " * 16),
+                                      binning=ind(_binning(names, summed, joint_only, "np.uint64(_b) + BIN1"),
+                                                  " " * 16),
                                       to_ob=ind("\n".join(to_ol) or "pass", " " * 20))
         return dict(sample_statistics="\n".join(["            for _l in range(nl):", load, observe,
                                                   "                _nsamp += 1", checks.rstrip("\n")]),
@@ -670,7 +671,9 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     scatter = []
     for o in binned:
         scatter += [f"_b = BL[{o}, _l]", f"if _b >= 0.0 and _b < _nb{o}:", f"    hist[{o}, np.uint64(_b) + BIN1] += 1",
-                    "elif _b < 0.0:", f"    hist[{o}, 0] += 1", "elif _b == _b:", f"    hist[{o}, _nb{o} + 1] += 1"]
+                    "elif _b < 0.0:", f"    hist[{o}, 0] += 1", f"elif OL[{o}, _l] == OL[{o}, _l]:",
+                    f"    hist[{o}, _nb{o} + 1] += 1"]
+    load = "\n".join(line for line in load.split("\n") if "mode = " not in line)  # no observable reads the mode
     text = ["for _l in range(nl):", load, observe, ind("\n".join(lane), " " * 4), "_nsamp += nl"]
     text = [ind(t, " " * 12) if k in (0, 3, 4) else t for k, t in enumerate(text)]
     if scatter:
@@ -687,7 +690,7 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
                 lane_totals=ind("\n".join(totals), " " * 4))
 
 
-def _binning(names: list, summed, joint_only=()) -> str:
+def _binning(names: list, summed, joint_only=(), index: str = "np.int64(_b) + 1") -> str:
     """A sample's statistics: sums in registers (written once per chunk), histograms with under/overflow bins.
 
     A NaN observable is counted, not summed or binned. One test settles it for all of them (the sum of the
@@ -697,8 +700,8 @@ def _binning(names: list, summed, joint_only=()) -> str:
     kept = [(o, name) for o, name in enumerate(names) if name not in joint_only]
     if not kept:
         return "pass"
-    fast = [(_SUMMING_FINITE if name in summed else _BINNING_FINITE).format(o=o) for o, name in kept]
-    slow = [(_SUMMING if name in summed else _BINNING).format(o=o) for o, name in kept]
+    fast = [(_SUMMING_FINITE if name in summed else _BINNING_FINITE).format(o=o, index=index) for o, name in kept]
+    slow = [(_SUMMING if name in summed else _BINNING).format(o=o, index=index) for o, name in kept]
     total = " + ".join(f"_ob{o}" for o, _ in kept)
     return "\n".join([f"_tot = {total}", "if _tot == _tot:", textwrap.indent("\n".join(fast), "    "), "else:",
                       textwrap.indent("\n".join(slow), "    ")])
@@ -708,7 +711,7 @@ def _binning(names: list, summed, joint_only=()) -> str:
 _BINNING_FINITE = """\
 _b = (_ob{o} - _lo{o}) * _sc{o}
 if _b >= 0.0 and _b < _nb{o}:
-    hist[{o}, np.int64(_b) + 1] += 1
+    hist[{o}, {index}] += 1
 elif _b < 0.0:
     hist[{o}, 0] += 1
 else:
@@ -724,7 +727,7 @@ _BINNING = """\
 _v = _ob{o}
 _b = (_v - _lo{o}) * _sc{o}
 if _b >= 0.0 and _b < _nb{o}:
-    hist[{o}, np.int64(_b) + 1] += 1
+    hist[{o}, {index}] += 1
 elif _b < 0.0:
     hist[{o}, 0] += 1
 elif _v == _v:
@@ -1157,10 +1160,6 @@ def outside(mode, x, t, p):
 
 '''
 _TEMPLATE_CHUNK = '''\
-# an unsigned bin index: numba adds no test for a negative index (a uint64 constant: numba freezes it)
-BIN1 = np.uint64(1)
-
-
 @nb.njit(nogil=True, cache=CACHE)
 def run_chunk(state, npaths, n_burn, n_samp, stride, dt, t0, x0, mode0, p, zx, zk, zf,
               obs_lo, obs_scale, obs_bins, hist, jx, jy, j_lo, j_scale, j_bins, jhist,
@@ -1249,6 +1248,11 @@ def chunk_work():
     return (np.empty(N), np.empty(WORK), np.empty(M), np.empty(N_OBS), np.empty((LANES, N)),
             np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64), np.zeros(IW, dtype=np.int64),
             np.zeros(FW), np.empty((N, LANES)))
+
+
+# bins as unsigned indices, for which numba adds no test of a negative index (a uint64 constant, which numba freezes;
+# read when run_chunk compiles, after the module has run)
+BIN1 = np.uint64(1)
 '''
 _TEMPLATE = _TEMPLATE_HEAD + _TEMPLATE_EVENTS + _TEMPLATE_DRIVE + _TEMPLATE_OUTSIDE + _TEMPLATE_CHUNK
 
