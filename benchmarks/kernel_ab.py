@@ -110,6 +110,8 @@ def main() -> None:
 
     def swapped(name, src, *rest, **kw):  # the baseline's source under a name of its own
         if variant[0] == "old":
+            if _key(src) not in old:
+                sys.exit(f"revision {args.baseline} generated no kernel for {name} (another model text or scheme)")
             src, name = old[_key(src)], name + "_baseline"
         return load(name, src, *rest, **kw)
 

@@ -86,6 +86,22 @@ def test_summed_observables_have_means_but_no_histogram():
         summed.density("x2")
 
 
+@SLOW  # two kernels
+def test_a_finite_observable_whose_bin_coordinate_is_nan_goes_to_the_overflow_bin_in_both_statistics_loops():
+    # a bin width of 5e-324 makes the scale inf, and (z - lo) * scale = 0 * inf is NaN for the finite z = 0: the
+    # sample is not non-finite, so it must land in the overflow bin, in the one-loop statistics (every observable
+    # binned) and in the per-lane ones (H only summed) alike; the per-lane loop once tested the coordinate instead
+    a = DuffingImpact().to_automaton()
+    kw = dict(dt=0.01, paths=8, t_end=3.0, t_burn=1.0, x0=(0.0, 0.0), seed=3,
+              observables={"H": a.observables["H"], "z": 0 * X})
+    for hist_h in ((0.0, 4.0, 40), None):
+        ens = simulate_automaton(a, "symplectic", histograms={"H": hist_h, "z": (0.0, 5e-324, 1)}, **kw)
+        n = ens.flags["samples"]
+        assert n == 8 * 200 and ens.flags["nonfinite"] == 0
+        np.testing.assert_array_equal(ens.counts["z"], [0, 0, n])
+        assert ens.mean("z").value == 0.0
+
+
 @SLOW  # two kernels; the default suite checks symplectic against the Gibbs marginal
 def test_symplectic_scheme_does_not_pump_energy_where_explicit_em_does():
     # x'' + c x' + x = sqrt(2D) xi without walls: E[H] = D / c exactly. Explicit EM adds energy at a rate of about

@@ -645,13 +645,13 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     per chunk, the lanes' own sums and NaN counts into the chunk's).
 
     Where an observable is only summed (the oscillator front end's x**2, y**2, ...), the lanes' observables, bin
-    coordinates, sums and NaN counts go into per-lane arrays (``BL``, ``SM``, ``NL``) in a loop with no call and no
-    branch, which runs on vectors of lanes, and the histograms' increments follow in a loop of their own: Example 1
-    ran 1.17-1.19x faster. Each lane's sums join the chunk's at its end, so they round differently from the other
-    variant's. Where every observable has a histogram, one loop bins and sums each lane at once, as on the GPU
-    (:func:`_binning`; the two loops ran 0.92x as fast on a forced model with one observable). Either way a NaN
-    observable is counted, not summed or binned, and an infinite one falls in the underflow or overflow bin and is
-    summed.
+    coordinates, sums and NaN counts go into per-lane arrays (``BL``, ``SM``, ``NL``) in a loop of conditional
+    expressions only (no ``if``), which runs on vectors of lanes, and the histograms' increments follow in a loop of
+    their own: Example 1 ran 1.17-1.19x faster. Each lane's sums join the chunk's at its end, so they round
+    differently from the other variant's. Where every observable has a histogram, one loop bins and sums each lane at
+    once, as on the GPU (:func:`_binning`; the two loops ran 0.92x as fast on a forced model with one observable).
+    Either way a NaN observable is counted, not summed or binned, and an infinite one falls in the underflow or
+    overflow bin and is summed.
     """
     ind = textwrap.indent
     kept = [o for o, name in enumerate(names) if name not in joint_only]
@@ -1258,8 +1258,8 @@ _TEMPLATE = _TEMPLATE_HEAD + _TEMPLATE_EVENTS + _TEMPLATE_DRIVE + _TEMPLATE_OUTS
 
 
 _LANE_STEP = '''\
-            # the lanes' increments first, in lane order, in a loop of their own: the stepping loop then calls
-            # nothing (the normals' rare branch calls exp and log), so that it can keep its values in registers and
+            # the lanes' increments first, in lane order, in a loop of their own: the stepping loop then calls no
+            # generator (the normals' rare branch calls exp and log), so that it can keep its values in registers and
             # run on vectors of lanes
             for _l in range(nl):
 {draw}
