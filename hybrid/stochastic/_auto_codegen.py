@@ -578,13 +578,15 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
         store=ind("\n".join(f"_L{i}[_l] = _x{i}" for i in range(n)), " " * 16),
     )
     template = _TEMPLATE if template is None else template
+    to_array = ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20)  # the lane's registers into x
     ranges = [f"_lo{o} = obs_lo[{o}]\n_sc{o} = obs_scale[{o}]\n_nb{o} = obs_bins[{o}]\n_sum{o} = 0.0"
               for o in range(len(obs))]  # the observables' histogram ranges and sums as the kernels' scalars
     src = (_located(template) if located else template).format(
         **(fields or {}),
         unpack=ind("\n".join(names.param_lines() + names.hoisted_lines() + ranges) or "pass", " " * 4),
         binning=ind(_binning(list(observables), summed, joint_only), " " * 16),
-        **_sample_statistics(list(observables), summed, joint_only, step["load"], ind(observe, " " * 16), n),
+        **_sample_statistics(list(observables), summed, joint_only, step["load"], ind(observe, " " * 16), to_array,
+                             step["lane_to_x"]),
         to_ob=ind("\n".join(f"ob[{o}] = _ob{o}" for o in range(len(obs))) or "pass", " " * 20),
         flush=ind("\n".join(f"sums[{o}] += _sum{o}" for o in range(len(obs))) or "pass",
                   " " * 4),
@@ -595,7 +597,7 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
                         if phases else "pass  # no phase sections in this kernel (generate_source(phases=True))",
                         " " * 12),
         **step,  # the lane step's pieces stay fields of the module template too
-        to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
+        to_array=to_array,
         observe=ind(observe, " " * 16),
         fast_checks_set=fast_checks_set,
         scheme_code=SCHEME_CODES[scheme], legs=2 if scheme == "baoab" else 1,
@@ -639,7 +641,8 @@ if phase_now:
                  phist, psums, pcount)"""
 
 
-def _sample_statistics(names: list, summed, joint_only, load: str, observe: str, n: int) -> dict:
+def _sample_statistics(names: list, summed, joint_only, load: str, observe: str, to_array: str, lane_to_x: str
+                       ) -> dict:
     """The CPU kernel's statistics of a sample: the fields ``sample_statistics`` (from the lanes' observables to the
     admissible-set check; each lane's observables end in ``OL`` for the joint histogram) and ``lane_totals`` (once
     per chunk, the lanes' own sums and NaN counts into the chunk's).
@@ -658,7 +661,7 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     binned = [o for o in kept if names[o] not in summed]
     to_ol = [f"OL[{o}, _l] = _ob{o}" for o in range(len(names))]
     if len(binned) == len(kept):  # every kept observable has a histogram: one loop, sums in registers
-        checks = SAMPLE_CHECKS.format(to_array=ind("\n".join(f"x[{i}] = _x{i}" for i in range(n)), " " * 20),
+        checks = SAMPLE_CHECKS.format(to_array=to_array,
                                       binning=ind(_binning(names, summed, joint_only, "np.uint64(_b) + BIN1"),
                                                   " " * 16),
                                       to_ob=ind("\n".join(to_ol) or "pass", " " * 20))
@@ -678,10 +681,9 @@ def _sample_statistics(names: list, summed, joint_only, load: str, observe: str,
     text = [ind(t, " " * 12) if k in (0, 3, 4) else t for k, t in enumerate(text)]
     if scatter:
         text.append(ind("\n".join(["for _l in range(nl):"] + [ind(line, "    ") for line in scatter]), " " * 12))
-    text.append(ind("\n".join(["if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a "
-                               "guard", "    for _l in range(nl):"]
-                              + [f"        x[{i}] = _L{i}[_l]" for i in range(n)]
-                              + ["        if outside(ML[_l], x, _t1, p):", "            counts[2] += 1"]), " " * 12))
+    text += ["            if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard",
+             "                for _l in range(nl):", ind(textwrap.dedent(lane_to_x), " " * 20),
+             "                    if outside(ML[_l], x, _t1, p):", "                        counts[2] += 1"]
     totals = ["for _l in range(LANES):  # the lanes' sums and NaN counts", "    counts[3] += np.int64(NL[0, _l])"]
     totals += [f"    _sum{o} += SM[{o}, _l]" for o in kept]
     arrays = ["BL = np.empty((N_OBS, LANES))", "SM = np.empty((N_OBS, LANES))", "NL = np.empty((1, LANES))",
