@@ -2,6 +2,7 @@
 
     python benchmarks/gpu_ablation.py                                  # Example 1, every variant, 2 rounds
     python benchmarks/gpu_ablation.py --models "impact pair" --variants norng,nobook,combo
+    python benchmarks/gpu_ablation.py --variants nested,nested@64,base@64   # register caps in the same process
     python benchmarks/gpu_ablation.py --ncu combo    # one launch of 2**17 x 2000 steps of one variant, for ncu:
     ncu -k regex:advance --launch-count 1 --section SourceCounters -o combo \
         python benchmarks/gpu_ablation.py --ncu combo
@@ -14,15 +15,22 @@ text (or, for ``nobm``, to the normal generator it imports), compiled under its 
   from a splitmix64 hash of (pair, path) in place of Philox and Box-Muller; ``nobm``: Philox's words as such
   uniforms, without Box-Muller. These two keep the noise's mean and variance, so E[observable] should stay close
   to the kernel's (printed, in the kernel's intervals). ``nostats``: no statistics at all; ``nohist``: no histogram
-  increment. ``nobook`` keeps only the bookkeeping this benchmark's runs need (no burn-in, every step a sample):
-  its numbers are the kernel's on a model without phase sections.
+  increment; ``noevent``: the event code never called (a guard that fires is ignored: it prices the event code's
+  place in the kernel, its registers most of all). ``nobook`` keeps only the bookkeeping this benchmark's runs need
+  (no burn-in, every step a sample): its numbers are the kernel's on a model without phase sections.
 * **rewrites** do the same arithmetic in another shape and must give the kernel's numbers exactly (checked: the
   observable's histogram and its mean to full precision): ``lazyt`` (the step's times computed only where the
   event code needs them), ``i32bin`` (the observables' cells straight into the block's shared copy, without
   ``count()``'s test of where a cell lies, from a 32-bit bin), ``i32loop`` (a 32-bit step counter), ``parity`` (a
   toggled parity instead of the 64-bit pair test), ``unroll2`` (two steps per loop pass, one Philox call at its
   head), ``ahead`` (as unroll2, drawing the next pair's normals a pass early, so that they do not wait on the
-  state), ``combo`` (lazyt + i32bin + parity + i32loop).
+  state), ``combo`` (lazyt + i32bin + parity + i32loop), ``nested`` (the event code out of the hot loop: an inner
+  loop that breaks at a step whose guard may have fired, an outer one that runs that step's event code and
+  statistics; ptxas then places a register cap's spills around the event code), ``nestedcombo`` (lazyt + i32bin +
+  parity + nested).
+
+A variant may name a register cap: ``nested@64`` is ``nested`` compiled under ``VIBRO_CUDA_MAX_REGISTERS=64``
+(``@0``: no cap); a cap does not change the arithmetic, so ``base@64`` must give base's numbers too.
 
 All variants of a model run in one process on one warm device, in rounds whose order alternates, with the
 unchanged kernel (``base``) in every round: per variant it prints the path-steps/s of each timing (2**20 paths x
@@ -41,6 +49,7 @@ import hashlib
 import inspect
 import json
 import math
+import os
 import re
 import statistics
 import sys
@@ -84,6 +93,7 @@ _BOOK = """                phase_now = False
 """
 _TIMES = "                t = t0 + _fty(step) * dt\n                _t1 = t0 + _fty(step + 1) * dt\n"
 _SLOW = "                if _slow:  # a guard may have fired: the step again through the general event loop\n"
+_STATS = "                if not (phase_now or sample):\n"
 _CHECK = "                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard\n"
 _DRAW = "_za, _zb = normal_pair(rk, ip, _zp)"
 _DRAW1 = """                _q = np.uint64(step)
@@ -214,14 +224,45 @@ def ahead(src):
     return _unrolled(src, True)
 
 
+def nested(src):
+    # the slow path out of the hot loop: the inner loop breaks at a step whose guard may have fired, the outer one
+    # runs that step's event code and statistics, then enters the inner loop again. The event code then lies one
+    # loop level out, where ptxas places its spills (a register cap)
+    _need(src, _LOOP, _SLOW, _STATS)
+    head, rest = src.split(_LOOP, 1)
+    lines = rest.splitlines(keepends=True)
+    end = next(i for i, ln in enumerate(lines) if ln.strip() and len(ln) - len(ln.lstrip()) <= 8)
+    body, tail = "".join(lines[:end]), "".join(lines[end:])
+    fast, after = body.split(_SLOW, 1)
+    slow, stats = after.split(_STATS, 1)
+    stats = _STATS + stats
+    return (head + "        _next = n0\n        while _next < n1:\n            _hit = np.int64(-1)\n"
+            "            for step in range(_next, n1):\n" + fast
+            + "                if _slow:\n                    _hit = np.int64(step)\n                    break\n"
+            + stats + "            if _hit < 0:\n                break\n            for _once in range(1):\n"
+            "                step = _hit\n" + _SLOW + slow + stats
+            + "            _next = _hit + 1\n" + tail)
+
+
+def noevent(src):
+    cut = "mode = event_step(mode, x, t, _t1, dt, dw, p, rec, sh, v_scale, v_bins, track, iw, fw, ws, elog)"
+    _need(src, cut)
+    return src.replace(cut, "mode = mode + 0")
+
+
 def combo(src):
     return i32loop(parity(i32bin(lazyt(src))))  # parity first: it inserts its preload before the loop's line
 
 
+def nestedcombo(src):
+    return nested(parity(i32bin(lazyt(src))))  # combo without i32loop (nested writes the loop's line itself)
+
+
 VARIANTS = {"base": lambda src: src, "norng": norng, "nobm": nobm, "nostats": nostats, "nohist": nohist,
             "nobook": nobook, "lazyt": lazyt, "i32bin": i32bin, "i32loop": i32loop, "parity": parity,
-            "unroll2": unroll2, "ahead": ahead, "combo": combo}
-EXACT = ("nobook", "lazyt", "i32bin", "i32loop", "parity", "unroll2", "ahead", "combo")
+            "unroll2": unroll2, "ahead": ahead, "combo": combo, "nested": nested,
+            "nestedcombo": nestedcombo, "noevent": noevent}
+EXACT = ("nobook", "lazyt", "i32bin", "i32loop", "parity", "unroll2", "ahead", "combo", "nested", "nestedcombo")
 """The variants that must give the unchanged kernel's numbers (nobook: on these runs, without phase sections)."""
 NEAR = ("norng", "nobm")
 """Ablations that keep the noise's mean and variance: E[observable] near the kernel's (not checked, printed)."""
@@ -253,13 +294,23 @@ def run(args) -> dict:
     original_pair = _cuda_rng.device_normal_pair(args.precision)
     sim = _auto_cuda.simulator_enabled()
 
+    cap_env = os.environ.get("VIBRO_CUDA_MAX_REGISTERS")
+
     def use(variant):
+        name, _, cap = variant.partition("@")  # "nested@64": the variant under a register cap of 64 (0: none)
+
         def generate(*a, **k):
             src, st = original_source(*a, **k)
-            return VARIANTS[variant](src), st
+            return VARIANTS[name](src), st
 
         _auto_cuda.generate_cuda_source = generate
-        _cuda_rng._DEVICE[args.precision] = _philox_uniforms(args.precision) if variant == "nobm" else original_pair
+        _cuda_rng._DEVICE[args.precision] = _philox_uniforms(args.precision) if name == "nobm" else original_pair
+        if cap:  # read when the source is generated
+            os.environ["VIBRO_CUDA_MAX_REGISTERS"] = cap
+        elif cap_env is None:
+            os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None)
+        else:
+            os.environ["VIBRO_CUDA_MAX_REGISTERS"] = cap_env
 
     def ensemble(paths, steps):
         with warnings.catch_warnings():
@@ -277,9 +328,10 @@ def run(args) -> dict:
         g = ensemble(2**17, 2000)
         print(f"{args.ncu}: one launch, {g.settings['device_seconds']:.3f} s")
         return {}
-    exact = tuple(v for v in EXACT if not (v == "nobook" and kw.get("phases")))
+    exact = tuple(v for v in EXACT if not (v == "nobook" and kw.get("phases"))) + ("base",)
     names = ["base"] + [v for v in args.variants.split(",") if v != "base"]
-    unknown = [v for v in names if v not in VARIANTS]
+    unknown = [v for v in names if v.partition("@")[0] not in VARIANTS or not v.partition("@")[2].isdigit()
+               and "@" in v]
     if unknown:
         raise SystemExit(f"gpu_ablation: unknown variants {unknown}; choose from {', '.join(VARIANTS)}")
     rows = {v: {"rates": [], "round_medians": []} for v in names}
@@ -316,6 +368,10 @@ def run(args) -> dict:
     finally:
         _auto_cuda.generate_cuda_source = original_source
         _cuda_rng._DEVICE[args.precision] = original_pair
+        if cap_env is None:
+            os.environ.pop("VIBRO_CUDA_MAX_REGISTERS", None)
+        else:
+            os.environ["VIBRO_CUDA_MAX_REGISTERS"] = cap_env
     print(f"\n{args.models}, {args.precision}, {args.paths} paths x {args.steps} steps, "
           f"{args.threads_per_block} threads per block"
           + (" (the simulator: not a timing)" if sim else ""))
@@ -326,9 +382,9 @@ def run(args) -> dict:
         row = rows[v]
         ratios = [a / b for a, b in zip(row["round_medians"], base["round_medians"])]
         row["ratio"] = statistics.mean(ratios)
-        if v in exact:
+        if v.partition("@")[0] in exact and v != "base":
             same = "same" if row["numbers"] == base["numbers"] else "CHANGED"
-        elif v in NEAR:
+        elif v.partition("@")[0] in NEAR:
             e, b = row["estimate"], base["estimate"]
             width = math.hypot(e.ci, b.ci)
             k = abs(e.value - b.value) / width if math.isfinite(width) and width > 0 else math.inf
@@ -338,7 +394,7 @@ def run(args) -> dict:
         res = f"{row.get('registers_per_thread', '-'):>9} {row.get('local_bytes_per_thread', '-'):>5}"
         print(f"{v:<9} {statistics.median(row['rates']):10.3g} {row['ratio']:7.2f}  "
               f"{' '.join(f'{x:.2f}' for x in ratios):<21} {res}  {same}")
-    bad = [v for v in names if v in exact and rows[v]["numbers"] != base["numbers"]]
+    bad = [v for v in names if v.partition("@")[0] in exact and rows[v]["numbers"] != base["numbers"]]
     if bad:
         raise SystemExit(f"gpu_ablation: the rewrites {bad} changed the numbers")
     for v, why in skipped.items():

@@ -714,13 +714,19 @@ def kernel_resources(settings: dict) -> dict:
     Occupancy: resident warps per SM over the most an SM holds, from the limits on threads, registers (allocated
     per warp in units of 256), shared memory and 32 blocks per SM (the CUDA occupancy calculator's rule).
     """
-    cuda = require_cuda()
+    require_cuda()
     if simulator_enabled():
         raise CudaUnavailableError("kernel_resources needs a GPU: the simulator compiles no kernel")
     module = _kernel_modules._LOADED.get(settings.get("cuda_kernel"))
     if module is None:
         raise ParameterError("kernel_resources: the ensemble's CUDA kernel was not run in this process")
-    kernel = module.advance
+    return compiled_resources(module.advance, int(settings["threads_per_block"]))
+
+
+def compiled_resources(kernel, tpb: int) -> dict:
+    """:func:`kernel_resources` of any numba-cuda kernel that has run once, at ``tpb`` threads per block
+    (``benchmarks/gpu_ceiling.py`` prices its hand-written kernels with it). Needs a real GPU."""
+    cuda = require_cuda()
 
     def one(value):  # a kernel compiled at its first launch answers per signature: it has one
         return int(next(iter(value.values())) if isinstance(value, dict) else value)
@@ -729,7 +735,6 @@ def kernel_resources(settings: dict) -> dict:
     local = one(kernel.get_local_mem_per_thread())
     shared = one(kernel.get_shared_mem_per_block())
     dev = cuda.get_current_device()
-    tpb = int(settings["threads_per_block"])
     warps = -(-tpb // 32)
     per_warp = -(-regs * 32 // 256) * 256
     blocks = min(int(dev.MAX_THREADS_PER_MULTIPROCESSOR) // tpb,
