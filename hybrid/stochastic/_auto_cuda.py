@@ -536,20 +536,23 @@ class CudaRun:
         paths = int(self.job.npaths.sum())
         total = a["n_burn"] + a["n_samp"] * a["stride"]
         launch_steps = self._launch_steps(launch_steps, paths)
-        host = self.fresh(paths)
-        host["n_done"] = np.zeros(1, np.int64)
         ckdir = Path(checkpoint) if checkpoint is not None else None
+        n, dev = 0, None
         if ckdir is not None and resume:
-            _auto_exec.load(ckdir, run_id, host)  # fills host in place; absent: start from t = 0
-        n = int(host["n_done"][0])
-        dev = {k: self.cuda.to_device(host[k]) for k in self.ORDER}
+            host = self.fresh(paths)
+            host["n_done"] = np.zeros(1, np.int64)
+            if _auto_exec.load(ckdir, run_id, host) is not None:  # fills host in place
+                n = int(host["n_done"][0])
+                dev = {k: self.cuda.to_device(host[k]) for k in self.ORDER}
+            del host
+        if dev is None:  # from t = 0: the rows start on the device
+            dev = self.device_fresh(paths)
         launches = 0
 
         def save(n_done):
             state = {k: dev[k].copy_to_host() for k in self.ORDER}
             state["n_done"] = np.array([n_done], np.int64)
             _auto_exec.write(ckdir, run_id, np.zeros(0, bool), state)
-            return state
 
         t_start = time.perf_counter()
         while n < total:
@@ -560,11 +563,59 @@ class CudaRun:
             _after_launch(n)
             if ckdir is not None and launches % checkpoint_every == 0 and n < total:
                 save(n)
-        state = save(n) if ckdir is not None else {k: dev[k].copy_to_host() for k in self.ORDER}
-        self._fill(rows, state, total)
+        if ckdir is not None:
+            save(n)
+        self._fill(rows, self.chunk_rows(dev, rows), total)
         return {"scheduler": "cuda", "precision": self.precision, "rng": RNG, "threads_per_block": self.tpb,
                 "launch_steps": int(launch_steps), "device_seconds": time.perf_counter() - t_start,
                 "cuda_kernel": self.name, "max_registers": self.max_registers}
+
+    def device_fresh(self, paths: int) -> dict:
+        """The device arrays of ``paths`` paths at t = 0 (:meth:`fresh`'s values), filled on the device."""
+        from . import _cuda_rows
+
+        a, mod, cuda = self.job.args, self.module, self.cuda
+        n_log = self.job.shapes["elog"][0][1]
+        shapes = {"XS": ((paths, self.n), self.ft), "MS": ((paths,), np.int64), "CNT": ((paths, 6), np.int64),
+                  "SM": ((paths, self.n_obs), np.float64),
+                  "PSM": ((paths, max(self.phases, 1), self.n_obs), np.float64),
+                  "IWS": ((paths, mod.IW), np.int64), "FWS": ((paths, mod.FW), np.float64),
+                  "elogs": ((paths, n_log, 3), np.float64)}
+        dev = {k: cuda.device_array(shape, dtype) for k, (shape, dtype) in shapes.items()}
+        dev["gh"] = cuda.to_device(np.zeros(self.lay["cells"], np.int64))
+        blocks = max(1, -(-paths // self.tpb))
+        _cuda_rows.init_rows[blocks, self.tpb](
+            cuda.to_device(np.asarray(a["x0"], self.ft)), np.int64(a["mode0"]), np.int64(mod.FW_GSTAT),
+            np.int64(self.n_trans), *(dev[k] for k in self.ORDER[:-1]))
+        cuda.synchronize()
+        return dev
+
+    def chunk_rows(self, dev: dict, rows: dict) -> dict:
+        """The per-chunk sums of the device rows ``dev`` (``rows``: the runner's arrays, for their shapes), computed
+        on the device in path order and copied back, with the histogram cells; the event logs and their counts
+        only where the run keeps a log."""
+        from . import _cuda_rows
+
+        cuda, mod = self.cuda, self.module
+        cp = int(self.job.shapes["elog"][0][0])
+        n_chunks = rows["counts"].shape[0]
+        nt = max(self.n_trans, 1)
+        out = {"counts": (rows["counts"].shape, np.int64), "sums": ((n_chunks, self.n_obs), np.float64),
+               "psums": ((n_chunks, max(self.phases, 1), self.n_obs), np.float64),
+               "events": ((n_chunks, nt), np.int64), "vsum": ((n_chunks, nt), np.float64),
+               "gstat": ((n_chunks, nt, 4), np.float64), "fbad": ((n_chunks,), np.float64)}
+        red = {k: cuda.device_array(shape, dtype) for k, (shape, dtype) in out.items()}
+        _cuda_rows.reduce_chunks[max(1, -(-n_chunks // 128)), 128](
+            np.int64(cp), np.int64(mod.IW_EVENTS), np.int64(mod.FW_GSTAT), np.int64(mod.FW_FBAD),
+            np.int64(self.n_trans), dev["CNT"], dev["SM"], dev["PSM"], dev["IWS"], dev["FWS"],
+            *(red[k] for k in out))
+        cuda.synchronize()
+        host = {k: v.copy_to_host() for k, v in red.items()}
+        host["gh"] = dev["gh"].copy_to_host()
+        if rows["elog"].shape[2]:  # a run that keeps event logs: every path's log and its count
+            host["elogs"] = dev["elogs"].copy_to_host()
+            host["nlog"] = dev["IWS"].copy_to_host()[:, mod.IW_NLOG]
+        return host
 
     def _check_memory(self, paths: int) -> None:
         """Refuse, with the estimate, per-path rows that do not fit in the device's memory (the simulator: 4 GB)."""
@@ -581,44 +632,36 @@ class CudaRun:
                    detail=f"{row} bytes of state, counters and sums per path, against 80 % of the device's free "
                           "memory", fix="run fewer paths per call and merge the ensembles")
 
-    def _fill(self, rows: dict, s: dict, total: int) -> None:
-        """Per-path rows -> the runner's per-chunk rows (added in path order); the histograms into chunk 0's row."""
-        a, mod, lay = self.job.args, self.module, self.lay
+    def _fill(self, rows: dict, r: dict, total: int) -> None:
+        """The runner's per-chunk ``rows`` from :meth:`chunk_rows`' sums ``r``; the histograms into chunk 0's row."""
+        a, lay = self.job.args, self.lay
         cp = self.job.shapes["elog"][0][0]
-        paths = s["XS"].shape[0]
+        paths = int(self.job.npaths.sum())
         starts = np.arange(0, paths, cp)
-        iw, fw = s["IWS"], s["FWS"]
-        cnt = s["CNT"].copy()
-        cnt[:, 1] += iw[:, 1]  # event_step's own counters: steps over the event cap, failed checks
-        cnt[:, 5] += iw[:, 5]
-        rows["counts"][:] = np.add.reduceat(cnt, starts, axis=0)
-        rows["sums"][:] = np.add.reduceat(s["SM"], starts, axis=0)
+        rows["counts"][:] = r["counts"]
+        rows["sums"][:] = r["sums"]
         nt = self.n_trans
         if nt:
-            rows["events"][:, :nt] = np.add.reduceat(iw[:, mod.IW_EVENTS:mod.IW_EVENTS + nt], starts, axis=0)
-            rows["vsum"][:, :nt] = np.add.reduceat(fw[:, :nt], starts, axis=0)
-            g = fw[:, mod.FW_GSTAT:mod.FW_GSTAT + 4 * nt].reshape(paths, nt, 4)
-            rows["gstat"][:, :nt, :2] = np.add.reduceat(g[:, :, :2], starts, axis=0)
-            rows["gstat"][:, :nt, 2] = np.minimum.reduceat(g[:, :, 2], starts, axis=0)
-            rows["gstat"][:, :nt, 3] = np.maximum.reduceat(g[:, :, 3], starts, axis=0)
-        for k, s0 in enumerate(starts):  # the speed at the first failed check of the chunk's first such path
-            bad = np.flatnonzero(iw[s0:s0 + cp, 5])
-            rows["fbad"][k, 0] = fw[s0 + bad[0], mod.FW_FBAD] if bad.size else 0.0
-        n_log = rows["elog"].shape[2]
-        padded = np.full((len(starts) * cp, n_log, 3), np.nan)
-        padded[:paths] = s["elogs"]
-        rows["elog"][:] = padded.reshape(len(starts), cp, n_log, 3)
-        nlog = np.zeros(len(starts) * cp, np.int64)
-        nlog[:paths] = iw[:, mod.IW_NLOG]
-        rows["nlog"][:] = nlog.reshape(len(starts), cp)
-        gh = s["gh"]
+            rows["events"][:, :nt] = r["events"][:, :nt]
+            rows["vsum"][:, :nt] = r["vsum"][:, :nt]
+            rows["gstat"][:, :nt] = r["gstat"][:, :nt]
+        rows["fbad"][:, 0] = r["fbad"]
+        if "elogs" in r:
+            n_log = rows["elog"].shape[2]
+            padded = np.full((len(starts) * cp, n_log, 3), np.nan)
+            padded[:paths] = r["elogs"]
+            rows["elog"][:] = padded.reshape(len(starts), cp, n_log, 3)
+            nlog = np.zeros(len(starts) * cp, np.int64)
+            nlog[:paths] = r["nlog"]
+            rows["nlog"][:] = nlog.reshape(len(starts), cp)
+        gh = r["gh"]
         nv = max(nt, 1)
         rows["vhist"][0] = gh[:nv * lay["vw"]].reshape(nv, lay["vw"])
         rows["hist"][0] = gh[lay["h_off"]:lay["j_off"]].reshape(self.n_obs, self.width)
         rows["jhist"][0] = gh[lay["j_off"]:lay["p_off"]].reshape(rows["jhist"].shape[1:])
         if self.phases:
             rows["phist"][0] = gh[lay["p_off"]:].reshape(self.phases, self.n_obs, self.width)
-            rows["psums"][:] = np.add.reduceat(s["PSM"], starts, axis=0)
+            rows["psums"][:] = r["psums"]
             # every path samples section k at the same steps: (step + 1) a multiple of phase_steps, after burn-in
             ends = np.arange(a["n_burn"] + 1, total + 1)
             ends = ends[ends % a["phase_steps"] == 0]
