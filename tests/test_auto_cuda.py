@@ -102,14 +102,24 @@ def test_device_module_is_the_generators_own_code(automaton, scheme):
     they are (only the decorators and the speed histogram's increment differ): one source, not a second template."""
     obs = dict(automaton.observables)
     lay = _auto_cuda.layout(len(obs), 22, len(automaton.transitions), 100, (1, 1), 0)
-    dev, st = _auto_cuda.generate_cuda_source(automaton, scheme, obs, lay=lay)
+    dev, st = _auto_cuda.generate_cuda_source(automaton, scheme, obs, lay=lay, joint=False)
     cpu, _ = _auto_codegen.generate_source(automaton, scheme, obs)
     for name in ("model", "_observe", "crosses", "interpolate", "locate", "event_step", "outside"):
         assert _function(dev, name) == _function(cpu, name), name
     fast = cpu[cpu.index("                if mode == 0:"):cpu.index("                    _slow = True")]
     assert fast.count("\n") > 5 and fast in dev
     assert "@nb.njit" not in dev and dev.count("@cuda.jit(device=True)") >= 7
-    assert "cuda.atomic.add(vhist, best * VW + np.int64(vb), 1)" in dev and "count(sh, gh, H_OFF + 0 * WIDTH" in dev
+    assert "cuda.atomic.add(vhist, best * VW + np.int64(vb), 1)" in dev
+    # the observables' cells fit in the block's shared copy: straight there, 32-bit bins; where they do not, count()
+    # sends each to the shared or the global cells
+    assert "cuda.atomic.add(sh, H_OFF + 0 * WIDTH + np.int32(_b) + 1, 1)" in dev and "count(sh, gh, H_OFF" not in dev
+    wide = _auto_cuda.layout(len(obs), 20_000, len(automaton.transitions), 100, (1, 1), 0)
+    big, _ = _auto_cuda.generate_cuda_source(automaton, scheme, obs, lay=wide)
+    assert "count(sh, gh, H_OFF + 0 * WIDTH + np.int64(_b) + 1)" in big and "np.int32(_b)" not in big
+    # what the run does not use is not generated: no phase sections, no joint histogram
+    assert "PSM[ip, kp, o]" not in dev and "J_OFF + int(by)" not in dev
+    both, _ = _auto_cuda.generate_cuda_source(automaton, scheme, obs, lay=lay, phases=True, joint=True)
+    assert "PSM[ip, kp, o]" in both and "J_OFF + int(by)" in both
 
 
 def test_f32_module_types_every_float_literal():

@@ -1011,31 +1011,35 @@ _LANE_GROUP = """\
 """The start of a group of LANES paths: each lane's initial state and mode."""
 
 
-SAMPLE_CHECKS = """\
+SAMPLE_GUARD = """\
                 if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard
 {to_array}
                     if outside(mode, x, _t1, p):
                         counts[2] += 1
 {binning}
+"""
+"""At a sample: the admissible set where the fast step did not settle it, the observables' histograms and sums."""
+JOINT_START = """\
                 if jx >= 0:
 {to_ob}
 """
-"""At a sample: the admissible set where the fast step did not settle it, the observables' histograms and sums, and
-the start of the joint histogram (the observables of its two axes in ``ob``)."""
+"""At a sample, after :data:`SAMPLE_GUARD`: the start of the joint histogram (the observables of its axes in ``ob``)."""
+SAMPLE_CHECKS = SAMPLE_GUARD + JOINT_START
 
 
-def step_head(indent: int, counter: str, step: str, next_step: str) -> str:
+def step_head(indent: int, counter: str, step: str, next_step: str, phases: bool = True) -> str:
     """The head of one step of the step loop: whether it is recorded, its start and end times, whether it closes a
     phase section or a sample (``counter`` counts the recorded steps since the last sample). ``step`` and
     ``next_step`` are the step and step + 1 as the loop's time arithmetic wants them (the CUDA kernel casts them to
-    its float type)."""
+    its float type). ``phases=False``: a loop without phase sections (the CUDA kernel of a run without them), whose
+    ``phase_now`` stays False."""
     lines = ["rec = step >= n_burn",
              f"t = t0 + {step} * dt",
              f"_t1 = t0 + {next_step} * dt",
              "phase_now = False",
              "sample = False",
              "if rec:",
-             "    phase_now = n_phase > 0 and (step + 1) % phase_steps == 0",
+             *(["    phase_now = n_phase > 0 and (step + 1) % phase_steps == 0"] if phases else []),
              f"    {counter} += 1",
              f"    if {counter} >= stride:",
              f"        {counter} = 0",

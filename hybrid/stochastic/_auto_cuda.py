@@ -37,6 +37,7 @@ from __future__ import annotations
 import ast
 import math
 import re
+import textwrap
 import time
 import types
 from pathlib import Path
@@ -166,11 +167,10 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, hv, obs_lo, obs_scale,
 {rows_in}
         _cs = (n0 - n_burn) % stride if n0 > n_burn else 0  # recorded steps since the last sample
         _nsamp = np.int64(0)  # samples of this launch: a scalar, counts[] lives in local memory
-        _zp = np.uint64(0xFFFFFFFFFFFFFFFF)  # the Philox counter of the normals in _za, _zb (none yet)
-        _za = _fty(0.0)
-        _zb = _fty(0.0)
-        for step in range(n0, n1):  # body indented as the CPU lane loop, for its pieces
-''' + _auto_codegen.step_head(16, "_cs", "_fty(step)", "_fty(step + 1)") + '''{normals}
+{draw_init}
+        for _k in range(np.int32(n1 - n0)):  # a 32-bit counter (n1 - n0 < 2**31: max_launch_steps)
+                step = n0 + np.int64(_k)  # the body indented as the CPU lane loop, for its pieces
+@@HEAD@@{normals}
 {fast}
                 if _slow:  # a guard may have fired: the step again through the general event loop
 {to_array}
@@ -179,35 +179,7 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, hv, obs_lo, obs_scale,
 {from_array}
                     if sample and FAST_CHECKS_SET and outside(mode, x, _t1, p):
                         counts[2] += 1
-                if not (phase_now or sample):
-                    continue
-{observe}
-                if phase_now:
-{to_ob}
-                    kp = ((step + 1) // phase_steps) % n_phase
-                    for o in range(N_OBS):
-                        v = ob[o]
-                        if v != v:
-                            continue
-                        PSM[ip, kp, o] += v
-                        b = (v - obs_lo[o]) * obs_scale[o]
-                        if b < 0.0:
-                            cell = 0
-                        elif b >= _fty(obs_bins[o]):
-                            cell = obs_bins[o] + 1
-                        else:
-                            cell = int(b) + 1
-                        count(sh, gh, P_OFF + (kp * N_OBS + o) * WIDTH + cell)
-                if not sample:
-                    continue
-                _nsamp += 1
-''' + _auto_codegen.SAMPLE_CHECKS + '''                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
-                    by = (ob[jy] - j_lo[1]) * j_scale[1]
-                    if bx >= 0.0 and bx < _fty(j_bins[0]) and by >= 0.0 and by < _fty(j_bins[1]):
-                        count(sh, gh, J_OFF + int(by) * NX + int(bx))
-                    else:
-                        counts[4] += 1
-{rows_out}
+@@STATS@@{rows_out}
         MS[ip] = mode
         for _i in range(IW):
             IWS[ip, _i] = iw[_i]
@@ -224,21 +196,61 @@ def advance(n0, n1, npath, n_burn, stride, rk, dt, t0, p, hv, obs_lo, obs_scale,
 
 {hoisted_function}'''
 
-_CUDA_TEMPLATE = (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPLATE_EVENTS
-                  + _auto_codegen._TEMPLATE_OUTSIDE + _KERNEL)
-"""The device module: the generator's header (constants, the model's functions), its event code and its admissible
-set test, around the kernel above."""
-
+_PHASES = """\
+                if phase_now:
+{to_ob}
+                    kp = ((step + 1) // phase_steps) % n_phase
+                    for o in range(N_OBS):
+                        v = ob[o]
+                        if v != v:
+                            continue
+                        PSM[ip, kp, o] += v
+                        b = (v - obs_lo[o]) * obs_scale[o]
+                        if b < 0.0:
+                            cell = 0
+                        elif b >= _fty(obs_bins[o]):
+                            cell = obs_bins[o] + 1
+                        else:
+                            cell = int(b) + 1
+                        count(sh, gh, P_OFF + (kp * N_OBS + o) * WIDTH + cell)
+"""
+_JOINT = """\
+                    bx = (ob[jx] - j_lo[0]) * j_scale[0]
+                    by = (ob[jy] - j_lo[1]) * j_scale[1]
+                    if bx >= 0.0 and bx < _fty(j_bins[0]) and by >= 0.0 and by < _fty(j_bins[1]):
+                        count(sh, gh, J_OFF + int(by) * NX + int(bx))
+                    else:
+                        counts[4] += 1
+"""
 _RECORD_SIGNATURE = ("elogs, gh):\n", "elogs, gh, ip0, REC):\n")
 _RECORD_AT = "                _nsamp += 1\n"
-_CUDA_TEMPLATE_RECORD = (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPLATE_EVENTS
-                         + _auto_codegen._TEMPLATE_OUTSIDE
-                         + _KERNEL.replace(*_RECORD_SIGNATURE).replace(_RECORD_AT, _RECORD_AT + "{record_rows}\n"))
-"""The recording variant (``generate_cuda_source(record=True)``, for the Monte Carlo spectrum): the same kernel
-with two more arguments, the first path's index ``ip0`` (its Philox counter: the same normals for any batch of
-paths) and ``REC`` (paths, samples, N), which receives the state of every sample. Generated only when asked, so
-the ensemble kernels' sources do not change."""
-assert _CUDA_TEMPLATE_RECORD.count("{record_rows}") == 1 and _KERNEL.count(_RECORD_SIGNATURE[0]) == 1
+
+
+def _cuda_template(phases: bool, joint: bool, record: bool) -> str:
+    """The device module's template: the generator's header (constants, the model's functions), its event code and
+    its admissible set test, around the kernel above, which holds only what the run uses: the phase sections'
+    statistics where it has sections (``phases``), the joint histogram's where it has one (``joint``). Dropping them
+    ran Example 1 1.08x and the impact pair 1.07x as fast on an H100 (benchmarks/gpu_ablation.py ``unused``).
+
+    ``record``: the recording variant (``generate_cuda_source(record=True)``, for the Monte Carlo spectrum): the
+    same kernel with two more arguments, the first path's index ``ip0`` (its Philox counter: the same normals for
+    any batch of paths) and ``REC`` (paths, samples, N), which receives the state of every sample.
+    """
+    stats = ("                if not (phase_now or sample):\n" if phases else "                if not sample:\n")
+    stats += "                    continue\n{observe}\n" + (_PHASES if phases else "")
+    if phases:
+        stats += "                if not sample:\n                    continue\n"
+    stats += _RECORD_AT + _auto_codegen.SAMPLE_GUARD + (_auto_codegen.JOINT_START + _JOINT if joint else "")
+    kernel = (_KERNEL.replace("@@HEAD@@", _auto_codegen.step_head(16, "_cs", "_fty(step)", "_fty(step + 1)",
+                                                                   phases=phases))
+              .replace("@@STATS@@", stats))
+    if record:
+        kernel = kernel.replace(*_RECORD_SIGNATURE).replace(_RECORD_AT, _RECORD_AT + "{record_rows}\n")
+    return (_PRELUDE + _auto_codegen._TEMPLATE_HEAD + _auto_codegen._TEMPLATE_EVENTS + _auto_codegen._TEMPLATE_OUTSIDE
+            + kernel)
+
+
+assert _KERNEL.count(_RECORD_SIGNATURE[0]) == 1 and _KERNEL.count("@@STATS@@") == 1
 
 _DECORATOR = re.compile(r"^@nb\.njit\([^)]*\)$", re.M)
 _HIST = re.compile(r"^(\s*)hist\[(\d+), (.+)\] \+= 1$", re.M)
@@ -246,14 +258,20 @@ _VHIST = re.compile(r"^(\s*)vhist\[best, (.+)\] \+= 1$", re.M)
 _BIN_COUNT = re.compile(r"\b_b < _nb(\d+)\b")
 
 
-def _to_device(src: str) -> str:
+def _to_device(src: str, shared_observables: bool = False) -> str:
     """The CPU statements of the generated pieces that the device does otherwise: ``@nb.njit`` -> device functions,
     per-chunk histogram increments -> atomics on the flat cells (shared where they fit), comparisons with an
-    integer bin count -> with the count in the kernel's float type."""
+    integer bin count -> with the count in the kernel's float type.
+
+    ``shared_observables``: every observable's cells lie in the block's shared copy, so an increment goes there
+    without :func:`count`'s test, its bin a 32-bit integer (as in a hand-written kernel)."""
     if re.search(r"\b_user_law\b", src):
         raise ModelError("scheduler='cuda' needs the restitution law as a sympy expression of v "
                          "(CustomRestitution('...')); a Python callable cannot be compiled for the device")
     src = _DECORATOR.sub("@cuda.jit(device=True)", src)
+    if shared_observables:
+        src = _HIST.sub(lambda m: f"{m[1]}cuda.atomic.add(sh, H_OFF + {m[2]} * WIDTH + "
+                                  f"{m[3].replace('np.int64(', 'np.int32(')}, 1)", src)
     src = _HIST.sub(lambda m: f"{m[1]}count(sh, gh, H_OFF + {m[2]} * WIDTH + {m[3]})", src)
     # the speeds' cells come first in the layout and always fit in the shared copy (event_step gets it as vhist)
     src = _VHIST.sub(lambda m: f"{m[1]}cuda.atomic.add(vhist, best * VW + {m[2]}, 1)", src)
@@ -317,12 +335,13 @@ def layout(n_obs: int, width: int, n_trans: int, v_bins: int, joint_bins: tuple,
 
 
 def generate_cuda_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich", *,
-                         summed=(), phases: bool = False, lay: dict, precision: str = "f64", cache: bool = True,
-                         max_registers: int | None = None, record: bool = False):
+                         summed=(), phases: bool = False, joint: bool = True, lay: dict, precision: str = "f64",
+                         cache: bool = True, max_registers: int | None = None, record: bool = False):
     """The device module of ``scheme`` for ``automaton``, generated by the automaton generator; ``(source, st)``.
 
-    ``lay``: the histogram layout (:func:`layout`), compile-time constants of the module. ``record``: the recording
-    variant (:data:`_CUDA_TEMPLATE_RECORD`), whose ``advance`` also stores every sample's state in ``REC``.
+    ``lay``: the histogram layout (:func:`layout`), compile-time constants of the module. ``phases``, ``joint``:
+    whether the run has phase sections and a joint histogram (the kernel holds their code only then). ``record``:
+    the recording variant (:func:`_cuda_template`), whose ``advance`` also stores every sample's state in ``REC``.
 
     Examples
     --------
@@ -338,15 +357,7 @@ def generate_cuda_source(automaton, scheme: str, observables: dict, convention: 
     m_noise = _auto_codegen.analyse(automaton, convention).n_noise
     n_obs = max(len(observables), 1)
     ind = _indent
-    draw = []
-    for k in range(m_noise):  # normal q = step * M + k is half of the Philox draw (q // 2) of this path
-        draw += [f"_q = np.uint64(step) * np.uint64({m_noise}) + np.uint64({k})" if m_noise > 1 else
-                 "_q = np.uint64(step)",
-                 "if (_q >> np.uint64(1)) != _zp:",
-                 "    _zp = _q >> np.uint64(1)",
-                 f"    _za, _zb = normal_pair(rk, {'ip0 + ip' if record else 'ip'}, _zp)",
-                 f"_w{k} = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)"]
-    draw.append("_slow = False")
+    draw, draw_init = _draws(m_noise, "ip0 + ip" if record else "ip")
     jit_options = "cache=True" if cache else ""
     if max_registers:
         jit_options += f", max_registers={int(max_registers)}"
@@ -356,20 +367,71 @@ def generate_cuda_source(automaton, scheme: str, observables: dict, convention: 
         rows_in=ind([f"_x{i} = XS[ip, {i}]" for i in range(n)] + [f"_sum{o} = SM[ip, {o}]" for o in range(n_obs)], 8),
         rows_out=ind([f"XS[ip, {i}] = _x{i}" for i in range(n)] + [f"SM[ip, {o}] = _sum{o}" for o in range(n_obs)],
                      8),
-        normals=ind(draw, 16), dw_store=ind([f"dw[{k}] = _w{k}" for k in range(m_noise)], 20),
+        normals=ind(draw, 16), draw_init=ind(draw_init, 8),
+        dw_store=ind([f"dw[{k}] = _w{k}" for k in range(m_noise)], 20),
         from_array=ind([f"_x{i} = x[{i}]" for i in range(n)], 20),
     )
     if record:  # sample k (k = 1, 2, ... after the burn-in) into row k - 1
         fields["record_rows"] = ind(["_r = (step + 1 - n_burn) // stride - 1"]
                                     + [f"REC[ip, _r, {i}] = _x{i}" for i in range(n)], 16)
     src, st = _auto_codegen.generate_source(automaton, scheme, observables, convention, cache=cache, summed=summed,
-                                            phases=phases, template=_CUDA_TEMPLATE_RECORD if record else _CUDA_TEMPLATE,
+                                            phases=phases, template=_cuda_template(phases, joint, record),
                                             fields=fields)
-    src = _to_device(src)
+    src = _lazy_times(_to_device(src, shared_observables=lay["shared"] >= lay["j_off"]))
     if precision == "f32":
         tree = _Float32().visit(ast.parse(src))
         src = "\n".join(src.splitlines()[:2]) + "\n" + ast.unparse(ast.fix_missing_locations(tree)) + "\n"
     return src, st
+
+
+_TIMES = "                t = t0 + _fty(step) * dt\n                _t1 = t0 + _fty(step + 1) * dt\n"
+_SLOW = "                if _slow:  # a guard may have fired: the step again through the general event loop\n"
+_GUARD = "                if not FAST_CHECKS_SET:  # splitting's or baoab's kicks after the flight can move a guard\n"
+
+
+def _lazy_times(src: str) -> str:
+    """The step's start and end times computed only where code reads them (the event code, the admissible set test)
+    when the fast step does not: two integer-to-double conversions fewer per step."""
+    if src.count(_TIMES) != 1 or src.count(_SLOW) != 1:  # the kernel template's own text: a change must show here
+        raise ModelError("the CUDA kernel template changed: _lazy_times must learn it")
+    fast = src.split(_TIMES)[1].split(_SLOW)[0]
+    if re.search(r"\bt\b|\b_t1\b", fast):  # a forced model's step reads the time
+        return src
+    times = textwrap.indent(_TIMES, "    ")
+    return src.replace(_TIMES, "").replace(_SLOW, _SLOW + times).replace(_GUARD, _GUARD + times)
+
+
+def _draws(m_noise: int, path: str) -> tuple[list, list]:
+    """The step's normals ``_w0 .. _w{M-1}`` (lines of the loop body) and what they need before the loop.
+
+    Normal q = step * M + k of a path is half of its Philox draw q // 2 (:mod:`hybrid.stochastic._cuda_rng`). One
+    noise: the draw of an even step serves the odd step after it, a parity toggled each step tells them apart (the
+    first step of a launch may be odd: the loop starts with its pair); two noises: one draw per step; more: each
+    normal's draw made when it differs from the last one's. ``path``: the path's Philox index.
+    """
+    if m_noise == 1:
+        return (["if _odd == 0:  # an even step: the pair of this step and the next",
+                 f"    _za, _zb = normal_pair(rk, {path}, np.uint64(step) >> np.uint64(1))",
+                 "    _w0 = sdt * _za",
+                 "else:",
+                 "    _w0 = sdt * _zb",
+                 "_odd ^= 1", "_slow = False"],
+                ["_za = _fty(0.0)", "_zb = _fty(0.0)",
+                 "_odd = np.int32(n0 & 1)",
+                 "if _odd == 1:",
+                 f"    _za, _zb = normal_pair(rk, {path}, np.uint64(n0) >> np.uint64(1))"])
+    if m_noise == 2:
+        return ([f"_za, _zb = normal_pair(rk, {path}, np.uint64(step))", "_w0 = sdt * _za", "_w1 = sdt * _zb",
+                 "_slow = False"], ["pass"])
+    draw = []
+    for k in range(m_noise):
+        draw += [f"_q = np.uint64(step) * np.uint64({m_noise}) + np.uint64({k})",
+                 "if (_q >> np.uint64(1)) != _zp:",
+                 "    _zp = _q >> np.uint64(1)",
+                 f"    _za, _zb = normal_pair(rk, {path}, _zp)",
+                 f"_w{k} = sdt * (_za if (_q & np.uint64(1)) == np.uint64(0) else _zb)"]
+    return draw + ["_slow = False"], ["_zp = np.uint64(0xFFFFFFFFFFFFFFFF)  # the Philox draw in _za, _zb (none yet)",
+                                      "_za = _fty(0.0)", "_zb = _fty(0.0)"]
 
 
 def _indent(lines: list, spaces: int) -> str:
@@ -446,7 +508,7 @@ class CudaRun:
         sim = simulator_enabled()
         self.max_registers = None if sim else max_registers_from_env(precision)
         src, st = generate_cuda_source(automaton, scheme, observables, convention, summed=summed, phases=phases > 0,
-                                       lay=self.lay, precision=precision, cache=not sim,
+                                       joint=a["jx"] >= 0, lay=self.lay, precision=precision, cache=not sim,
                                        max_registers=self.max_registers, record=self.RECORD)
         self.source, self.n = src, len(st.states)
         where = ("sim" if sim else "dev") + ("_rec" if self.RECORD else "")
@@ -860,9 +922,9 @@ def kernel_signature(precision: str = "f64", record: bool = False, n_params: int
 
 
 def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: int = 42, v_bins: int = 100,
-                phases: int = 0, precision: str = "f64", cc=(9, 0), record: bool = False) -> str:
-    """PTX of the automaton kernel (``record``: its recording variant) for compute capability ``cc`` (default
-    sm_90, the H100), without a GPU.
+                phases: int = 0, precision: str = "f64", cc=(9, 0), record: bool = False, joint: bool = False) -> str:
+    """PTX of the automaton kernel (``record``: its recording variant; ``joint``: with a joint histogram) for
+    compute capability ``cc`` (default sm_90, the H100), without a GPU.
 
     The real numba-cuda pipeline (typing, lowering, NVVM), which the simulator skips. Needs numba-cuda and the NVVM
     and NVRTC libraries (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels or a CUDA toolkit),
@@ -873,8 +935,9 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
     if getattr(cuda, "implementation", "") != "NVIDIA" or simulator_enabled():
         raise CudaUnavailableError(f"compile_ptx needs numba-cuda ({INSTALL_HINT}) and NUMBA_ENABLE_CUDASIM unset")
     lay = layout(max(len(observables), 1), histograms_width, len(automaton.transitions), v_bins, (1, 1), phases)
-    src, st = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, precision=precision,
-                                   cache=False, max_registers=max_registers_from_env(precision), record=record)
+    src, st = generate_cuda_source(automaton, scheme, observables, lay=lay, phases=phases > 0, joint=joint,
+                                   precision=precision, cache=False, max_registers=max_registers_from_env(precision),
+                                   record=record)
     name = f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}"
     module, _ = _kernel_modules.load_source(name, src)
     from numba.cuda import dispatcher
