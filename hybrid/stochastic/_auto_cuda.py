@@ -781,7 +781,8 @@ the compiler's 160 registers and 4.4-4.6e10 capped at 96; the impact pair 2.1e10
 Example 1 3.8-4.5e10 with 138 and 4.8-4.9e10 at 64. The spills the caps cause cost less than the occupancy gained.
 With the launch arguments (2026-11-27, first machine, one timing per cap, six at 96): Example 1 3.6e10 uncapped
 (130 registers), 4.3e10 at 128, 4.6-4.9e10 at 96, 3.8-4.1e10 at 80-64; the impact pair 2.4e10 uncapped, 2.9-3.2e10
-at 128-80."""
+at 128-80 (those timings held 0.22 s of host work per run). Without it, caps of 64 and 80 still ran no faster than
+96 (0.86-0.98 of the same kernel, benchmarks/data/gpu_h100_ablation_runner.txt)."""
 
 
 def max_registers_from_env(precision: str = "f64") -> int | None:
