@@ -69,7 +69,23 @@ def models() -> dict:
         "energy_level": (energy_level(), "splitting",
                          dict(common, paths=16, dt=0.05, t_end=10.0, t_burn=2.0, x0=(0.5, 0.0),
                               histograms={"H": (0.0, 1.0, 10)})),
+        # three noises: the kernel's general draw (each normal's Philox draw where it differs from the last one's)
+        "three_noises": (three_noises(), "milstein",
+                         dict(common, dt=0.05, t_end=15.0, t_burn=5.0, x0=(0.0, 0.0, 0.0, 0.0),
+                              histograms={"H": (0.0, 4.0, 40), "w": (-3.0, 3.0, 30)})),
     }
+
+
+def three_noises():
+    """An oscillator against a wall at x = 1 (Newton's law, r = 0.8), driven by white noise and by an OU process u,
+    beside an independent OU process w: three noises."""
+    x, v, u, w = (real_symbol(n) for n in ("x", "v", "u", "w"))
+    c, d, a, s, r = (real_symbol(n) for n in ("c", "D", "a", "s", "r"))
+    noise = ((0, 0, 0), (sp.sqrt(2 * d), 0, 0), (0, sp.sqrt(2 * a * s), 0), (0, 0, 1))
+    return HybridAutomaton((x, v, u, w), {"c": 0.1, "D": 0.1, "a": 2.0, "s": 0.1, "r": 0.8},
+                           [Mode("m", (v, -x - c * v + u, -a * u, -w), noise)],
+                           [Transition("wall", "m", "m", x - 1, 1, (x, -r * v, u, w))],
+                           observables={"H": (x**2 + v**2) / 2, "w": w})
 
 
 def energy_level():

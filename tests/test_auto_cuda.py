@@ -43,7 +43,7 @@ import auto_cuda_sim_runs as runs  # noqa: E402
 HAVE_NUMBA_CUDA = any(importlib.util.find_spec(m) is not None for m in ("numba_cuda", "numba.cuda"))
 needs_sim = pytest.mark.skipif(not HAVE_NUMBA_CUDA, reason="numba.cuda is not importable (pip install -e '.[test]' "
                                                            "installs numba-cuda, whose simulator these tests use)")
-MODELS = ("example1", "stop", "impact_pair", "table", "forced", "ou", "energy_level")
+MODELS = ("example1", "stop", "impact_pair", "table", "forced", "ou", "energy_level", "three_noises")
 
 
 def _env(**extra):
