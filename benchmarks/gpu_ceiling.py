@@ -111,26 +111,13 @@ def fast_normal_pair(device, philox):
     return device(pair)
 
 
-def _philox7(rnd):
-    def philox(c0, c1, c2, c3, rk):
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[0], rk[1])
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[2], rk[3])
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[4], rk[5])
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[6], rk[7])
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[8], rk[9])
-        c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[10], rk[11])
-        return rnd(c0, c1, c2, c3, rk[12], rk[13])
-
-    return philox
-
-
 def make_kernel(variant: str):
     """The hand-written kernel ``kernel(n0, n1, rk, XS, SM, gh)`` of ``variant`` (steps [n0, n1), n0 and n1 even)."""
     opt = _options(variant)
     sim = _auto_cuda.simulator_enabled()
     device = (lambda f: f) if sim else cuda.jit(device=True, inline=True)
     rnd = device(_cuda_rng._philox_round)
-    philox = device(_cuda_rng._make_philox(rnd) if opt["rounds"] == 10 else _philox7(rnd))
+    philox = device(_cuda_rng._make_philox(rnd, opt["rounds"]))
     if opt["bm"] == "f64":
         pair = device(_cuda_rng._make_normal_pair(philox, False, _cuda_rng._sincos_2pi)) if sim else None
         if pair is None:

@@ -56,9 +56,14 @@ def round_keys(k0, k1) -> tuple:
     return tuple(out)
 
 
-def _make_philox(rnd):
-    def philox4x32_10(c0, c1, c2, c3, rk):
-        # ten rounds written out (a loop was not unrolled by NVVM); rk: round_keys(k0, k1)
+def _make_philox(rnd, rounds: int = 10):
+    """Philox-4x32 of ``rounds`` rounds (10, the generator's; 7 for benchmarks/gpu_ceiling.py's price of fewer)."""
+    if rounds not in (7, 10):
+        raise ValueError(f"Philox-4x32 with {rounds} rounds: 7 or 10")
+
+    def philox4x32(c0, c1, c2, c3, rk):
+        # the rounds written out (a loop was not unrolled by NVVM); rk: round_keys(k0, k1). ``rounds`` is a constant
+        # of the closure, so numba drops the branch it does not take
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[0], rk[1])
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[2], rk[3])
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[4], rk[5])
@@ -66,11 +71,13 @@ def _make_philox(rnd):
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[8], rk[9])
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[10], rk[11])
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[12], rk[13])
+        if rounds == 7:
+            return c0, c1, c2, c3
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[14], rk[15])
         c0, c1, c2, c3 = rnd(c0, c1, c2, c3, rk[16], rk[17])
         return rnd(c0, c1, c2, c3, rk[18], rk[19])
 
-    return philox4x32_10
+    return philox4x32
 
 
 _philox_keyed = _make_philox(_philox_round)
