@@ -26,9 +26,10 @@ text (or, for ``nobm``, to the normal generator it imports), compiled under its 
 
   Earlier rewrites that paid are now the template's own (docs/gpu.md): the times computed only where the event
   code reads them, 32-bit bins straight into the shared cells, a 32-bit step counter, a toggled parity for the
-  normals' pairs, no phase or joint code in a run without them (H100, before the runner's fixed cost was cut:
-  1.06x together on Example 1, 1.12x on the impact pair; and 1.08x, 1.07x). Others did not: two steps per loop
-  pass, the next pair drawn a pass early, the event code out of the hot loop in a loop of its own.
+  normals' pairs (H100, with the runner whose host work was cut: 1.06x together on Example 1, 1.12x on the impact
+  pair), no phase or joint code in a run without them (1.08x, 1.07x; benchmarks/data/gpu_h100_ablation_runner.txt).
+  Others did not: two steps per loop pass, the next pair drawn a pass early, the event code out of the hot loop in
+  a loop of its own (gpu_h100_ablation_run4.log, gpu_h100_ablation_nested.txt).
 
 A variant may name a register cap: ``bake@64`` is ``bake`` compiled under ``VIBRO_CUDA_MAX_REGISTERS=64``
 (``@0``: no cap); a cap does not change the arithmetic, so ``base@64`` must give base's numbers too.
@@ -153,8 +154,8 @@ _EXAMPLE1_OBS = ("obs_lo = (0.0,)", "obs_scale = (100.0,)", "obs_bins = (400,)")
 def _literals(*lines):
     """A rewrite that sets launch arguments to literals at the kernel's top: Example 1's values in gpu_throughput's
     runs (its histogram of H and hoisted invariants are checked first)."""
-    def rewrite(src):
-        _need(src, _ADVANCE_DOC, _EXAMPLE1_HOISTED, "\nN_OBS = 1\n")
+    def rewrite(src):  # f64: the literals are doubles; gpu_throughput's DT is the 1e-3 baked in
+        _need(src, _ADVANCE_DOC, _EXAMPLE1_HOISTED, "\nN_OBS = 1\n", "precision f64.")
         return src.replace(_ADVANCE_DOC, _ADVANCE_DOC + "".join(f"    {ln}\n" for ln in lines))
     return rewrite
 

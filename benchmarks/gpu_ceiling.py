@@ -306,8 +306,9 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     names = [v.strip() for v in a.variants.split(",") if v.strip()]
     bad = [v for v in names if v not in VARIANTS]
-    if bad or a.steps % 2 or a.steps < 2:
-        ap.error(f"unknown variants {bad}" if bad else "--steps must be even and at least 2")
+    if bad or a.steps % 2 or a.steps < 2 or a.paths % 2:
+        ap.error(f"unknown variants {bad}" if bad else "--steps and --paths must be even (x2: two paths per thread), "
+                 "--steps at least 2")
     if a.quick:
         a.paths, a.steps, a.threads_per_block = 64, 40, 32
     if "r10-f64" not in names:
