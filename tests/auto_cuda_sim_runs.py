@@ -190,9 +190,27 @@ def cli_runs(out: Path) -> None:
     (out / "cli_rc.txt").write_text(f"{rc} {rc2}")
 
 
+def check_device_fresh(out: Path) -> None:
+    """Every run's rows at t = 0 filled on the device (``device_fresh``) against the host's (``fresh``): the names
+    of the arrays that differ, per call, into OUTDIR/device_fresh.txt (NaN equal to NaN)."""
+    real = _auto_cuda.CudaRun.device_fresh
+
+    def checked(self, paths):
+        dev = real(self, paths)
+        host = self.fresh(paths)
+        bad = [k for k in self.ORDER if not np.array_equal(dev[k].copy_to_host(), host[k], equal_nan=True)
+               or dev[k].copy_to_host().dtype != host[k].dtype]
+        with open(out / "device_fresh.txt", "a") as f:
+            f.write(f"{self.name} {paths} {' '.join(bad) or 'equal'}\n")
+        return dev
+
+    _auto_cuda.CudaRun.device_fresh = checked
+
+
 def main(out: Path) -> None:
     warnings.simplefilter("ignore")
     out.mkdir(parents=True, exist_ok=True)
+    check_device_fresh(out)
     table = models()
     runs = {name: (name, {}) for name in table} | VARIANTS
     for run, (name, extra) in runs.items():

@@ -285,6 +285,15 @@ def test_device_chunk_sums_match_the_paths_rows(sim, name):
 
 
 @needs_sim
+def test_rows_filled_on_the_device_are_the_hosts(sim):
+    """Every simulated run's per-path rows at t = 0, filled by the device (hybrid/stochastic/_cuda_rows.py), equal
+    the host's ``fresh`` rows: values, NaN event logs, the guard statistics' +-inf, dtypes (f32 state included)."""
+    lines = (sim / "device_fresh.txt").read_text().splitlines()
+    assert len(lines) >= len(MODELS) and any("_f32_" in line for line in lines)
+    assert all(line.endswith(" equal") for line in lines), lines
+
+
+@needs_sim
 @pytest.mark.parametrize("name", ["impact_pair", "forced"])
 def test_launch_configuration_changes_no_number(sim, name):
     """32 threads per block in one launch vs 64 threads and launches of 37 (23) steps: bitwise the same, events,
