@@ -18,8 +18,9 @@ their decorators turned into ``cuda.jit(device=True)``. Only the loop around the
   fit in 48 KiB; the rest goes straight to global memory) and adds it once per launch into the global int64 cells.
   Integer atomics give the same sums in any order.
 * **Per-path rows.** Each thread keeps its path's state, mode, counters and sums in registers and local memory and
-  stores them in one row per path after each launch; the host adds the rows of each chunk of ``chunk_paths`` paths
-  in path order, so that the ensemble has the same per-chunk rows, and batch-means intervals, as on the CPU.
+  stores them in one row per path after each launch. The rows start on the device, and the device adds the rows of
+  each chunk of ``chunk_paths`` paths in path order (:mod:`hybrid.stochastic._cuda_rows`), so that the ensemble has
+  per-chunk rows, and batch-means intervals, as on the CPU, whatever the launch.
 * **Launches and checkpoints.** The steps are cut into launches of ``launch_steps``; every ``checkpoint_every``
   launches the rows and histograms go to the automaton checkpoint file (checksummed, tied to the run's identity,
   which for CUDA also names the generator and the precision), and ``resume`` continues from the saved step.
@@ -568,7 +569,7 @@ class CudaRun:
         """The step rule's guard statistics (transitions, 4) of chunk 0's paths over ``steps`` steps of burn-in,
         every step through ``event_step`` (as the CPU pilot)."""
         paths = int(self.job.npaths[0])
-        dev = {k: self.cuda.to_device(v) for k, v in self.fresh(paths).items()}
+        dev = self.device_fresh(paths)
         done = 0
         while done < steps:
             n1 = min(steps, done + max_launch_steps(self.tpb))
@@ -660,8 +661,8 @@ class CudaRun:
 
     def chunk_rows(self, dev: dict, rows: dict) -> dict:
         """The per-chunk sums of the device rows ``dev`` (``rows``: the runner's arrays, for their shapes), computed
-        on the device in path order and copied back, with the histogram cells; the event logs and their counts
-        only where the run keeps a log."""
+        on the device (:func:`hybrid.stochastic._cuda_rows.reduce_chunks`) and copied back, with the histogram
+        cells; the event logs and their counts only where the run keeps a log."""
         from . import _cuda_rows
 
         cuda, mod = self.cuda, self.module
@@ -755,7 +756,7 @@ class CudaRecorder(CudaRun):
         paths = int(hi - lo)
         n_burn, total = int(a["n_burn"]), int(a["n_burn"] + a["n_samp"] * a["stride"])
         launch_steps = self._launch_steps(launch_steps, paths)
-        dev = {k: self.cuda.to_device(v) for k, v in self.fresh(paths).items()}
+        dev = self.device_fresh(paths)
         rec = self.cuda.to_device(np.zeros((paths, int(a["n_samp"]), self.n), self.ft))
         start = None
         n = 0
