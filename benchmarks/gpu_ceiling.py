@@ -262,8 +262,16 @@ def registers(names) -> dict:
     from numba.cuda import dispatcher
 
     ptxas = shutil.which("ptxas")
+    if ptxas is None:  # the nvidia-cuda-nvcc wheel ships one
+        try:
+            import nvidia.cuda_nvcc as wheel
+
+            ptxas = str(Path(list(wheel.__path__)[0]) / "bin" / "ptxas")
+        except ImportError:
+            pass
     if ptxas is None or _auto_cuda.simulator_enabled():
-        raise SystemExit("gpu_ceiling --registers: needs ptxas on PATH and NUMBA_ENABLE_CUDASIM unset")
+        raise SystemExit("gpu_ceiling --registers: needs ptxas (on PATH or from the nvidia-cuda-nvcc wheel) and "
+                         "NUMBA_ENABLE_CUDASIM unset")
     sig = (types.int64, types.int64, types.UniTuple(types.uint32, 20), types.float64[:, ::1], types.float64[::1],
            types.int64[::1])
     current = dispatcher.get_current_device  # no device: the compute capability of an H100
