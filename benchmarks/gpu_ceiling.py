@@ -85,30 +85,14 @@ def _options(variant: str) -> dict:
 def fast_normal_pair(device, philox):
     """``normal_pair(rk, path, pair)`` with the 53-bit uniforms of the f64 generator and Box-Muller in float32."""
     sim = _auto_cuda.simulator_enabled()
-    if not sim:
+    if sim:
+        sincos = _cuda_rng._sincos_2pi_f32
+    else:
         from numba.cuda import libdevice
-    mask, s32, s5, s6, s1, t26, u53 = (_cuda_rng._MASK, _cuda_rng._S32, _cuda_rng._S5, _cuda_rng._S6, _cuda_rng._S1,
-                                       _cuda_rng._T26, _cuda_rng._U53)
-    two_f, m2_f, two_pi_f = np.float32(2.0), np.float32(-2.0), np.float32(2.0 * math.pi)
 
-    def sincos(u):
-        if sim:
-            return math.sin(two_pi_f * u), math.cos(two_pi_f * u)
-        return libdevice.sincospif(two_f * u)
-
-    sincos_d = device(sincos)
-
-    def pair(rk, path, q):
-        pr = np.uint64(q)
-        pa = np.uint64(path)
-        a, b, c, d = philox(pr & mask, pr >> s32, pa & mask, pa >> s32, rk)
-        u1 = np.float64((a >> s5) * t26 + (b >> s6) + s1) * u53
-        u2 = np.float64((c >> s5) * t26 + (d >> s6)) * u53
-        r = math.sqrt(m2_f * math.log(np.float32(u1)))
-        s, co = sincos_d(np.float32(u2))
-        return np.float64(r * co), np.float64(r * s)
-
-    return device(pair)
+        sincospif, two_f = libdevice.sincospif, np.float32(2.0)
+        sincos = device(lambda u: sincospif(two_f * u))
+    return device(_cuda_rng._make_normal_pair(philox, False, sincos, f32_transform=True))
 
 
 def make_kernel(variant: str):

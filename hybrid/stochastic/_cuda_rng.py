@@ -106,9 +106,14 @@ def _sincos_2pi_f32(u):
     return math.sin(t), math.cos(t)
 
 
-def _make_normal_pair(philox, single: bool, sincos):
+def _make_normal_pair(philox, single: bool, sincos, f32_transform: bool = False):
     """Box-Muller on one Philox call, written once for the host (tests) and the device (``philox`` jitted);
-    ``sincos(u)``: sin and cos of 2 pi u."""
+    ``sincos(u)``: sin and cos of 2 pi u.
+
+    ``f32_transform`` (double precision only, for benchmarks/gpu_ceiling.py's price of it): the same 53-bit
+    uniforms, the logarithm, square root and ``sincos`` (a float32 one) in single precision, the normals returned
+    as doubles. A constant of the closure: numba drops the branch not taken.
+    """
     if single:
         def normal_pair(rk, path, pair):
             pr = np.uint64(pair)
@@ -126,6 +131,10 @@ def _make_normal_pair(philox, single: bool, sincos):
             a, b, c, d = philox(pr & _MASK, pr >> _S32, pa & _MASK, pa >> _S32, rk)
             u1 = np.float64((a >> _S5) * _T26 + (b >> _S6) + _S1) * _U53
             u2 = np.float64((c >> _S5) * _T26 + (d >> _S6)) * _U53
+            if f32_transform:
+                r32 = math.sqrt(_M2_F * math.log(np.float32(u1)))
+                s32, co32 = sincos(np.float32(u2))
+                return np.float64(r32 * co32), np.float64(r32 * s32)
             r = math.sqrt(-2.0 * math.log(u1))
             s, co = sincos(u2)
             return r * co, r * s
