@@ -542,17 +542,26 @@ class CudaRun:
                         floats(a["j_scale"]), ints(a["j_bins"]), ft(a["v_scale"]), np.int64(a["v_bins"]))
         self._check_memory(int(job.npaths.sum()))  # before any compile or launch
 
+    def row_shapes(self, paths: int) -> dict:
+        """Shape and dtype of each per-path row array of ``paths`` paths (:data:`ORDER` but the histogram cells):
+        one layout for the host's rows, the device's and the memory estimate."""
+        mod = self.module
+        return {"XS": ((paths, self.n), self.ft), "MS": ((paths,), np.int64), "CNT": ((paths, 6), np.int64),
+                "SM": ((paths, self.n_obs), np.float64), "PSM": ((paths, max(self.phases, 1), self.n_obs), np.float64),
+                "IWS": ((paths, mod.IW), np.int64), "FWS": ((paths, mod.FW), np.float64),
+                "elogs": ((paths, self.job.shapes["elog"][0][1], 3), np.float64)}
+
     def fresh(self, paths: int) -> dict:
         """The host arrays of ``paths`` paths at t = 0."""
         a, mod = self.job.args, self.module
-        fw = np.zeros((paths, mod.FW))
+        host = {k: np.zeros(shape, dtype) for k, (shape, dtype) in self.row_shapes(paths).items()}
+        host["XS"][:] = a["x0"].astype(self.ft)
+        host["MS"][:] = a["mode0"]
         for j in range(self.n_trans):  # [sum, count, min, max] of the guard changes: the extremes start empty
-            fw[:, mod.FW_GSTAT + 4 * j + 2], fw[:, mod.FW_GSTAT + 4 * j + 3] = np.inf, -np.inf
-        n_log = self.job.shapes["elog"][0][1]
-        return {"XS": np.tile(a["x0"].astype(self.ft), (paths, 1)), "MS": np.full(paths, a["mode0"], np.int64),
-                "CNT": np.zeros((paths, 6), np.int64), "SM": np.zeros((paths, self.n_obs)),
-                "PSM": np.zeros((paths, max(self.phases, 1), self.n_obs)), "IWS": np.zeros((paths, mod.IW), np.int64),
-                "FWS": fw, "elogs": np.full((paths, n_log, 3), np.nan), "gh": np.zeros(self.lay["cells"], np.int64)}
+            host["FWS"][:, mod.FW_GSTAT + 4 * j + 2], host["FWS"][:, mod.FW_GSTAT + 4 * j + 3] = np.inf, -np.inf
+        host["elogs"][:] = np.nan
+        host["gh"] = np.zeros(self.lay["cells"], np.int64)
+        return host
 
     def advance(self, dev: dict, paths: int, n0: int, n1: int, n_burn: int, track: bool) -> None:
         """Launch the kernel on the device arrays ``dev`` for steps [n0, n1) and wait for it."""
@@ -644,13 +653,7 @@ class CudaRun:
         from . import _cuda_rows
 
         a, mod, cuda = self.job.args, self.module, self.cuda
-        n_log = self.job.shapes["elog"][0][1]
-        shapes = {"XS": ((paths, self.n), self.ft), "MS": ((paths,), np.int64), "CNT": ((paths, 6), np.int64),
-                  "SM": ((paths, self.n_obs), np.float64),
-                  "PSM": ((paths, max(self.phases, 1), self.n_obs), np.float64),
-                  "IWS": ((paths, mod.IW), np.int64), "FWS": ((paths, mod.FW), np.float64),
-                  "elogs": ((paths, n_log, 3), np.float64)}
-        dev = {k: cuda.device_array(shape, dtype) for k, (shape, dtype) in shapes.items()}
+        dev = {k: cuda.device_array(shape, dtype) for k, (shape, dtype) in self.row_shapes(paths).items()}
         dev["gh"] = cuda.to_device(np.zeros(self.lay["cells"], np.int64))
         blocks = max(1, -(-paths // self.tpb))
         _cuda_rows.init_rows[blocks, self.tpb](
@@ -690,9 +693,7 @@ class CudaRun:
         """Refuse, with the estimate, per-path rows that do not fit in the device's memory (the simulator: 4 GB)."""
         from hybrid.sizes import check_size
 
-        mod, ft = self.module, np.dtype(self.ft).itemsize
-        row = (self.n * ft + 8 * (1 + 6 + self.n_obs + max(self.phases, 1) * self.n_obs + mod.IW + mod.FW)
-               + 24 * self.job.shapes["elog"][0][1])
+        row = sum(math.prod(shape) * np.dtype(dtype).itemsize for shape, dtype in self.row_shapes(1).values())
         if simulator_enabled():
             limit = 4e9
         else:
