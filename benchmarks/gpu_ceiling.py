@@ -231,31 +231,23 @@ def run_hand(kernel, opt, paths: int, steps: int, tpb: int, rk) -> tuple[float, 
 
 
 def registers(names) -> dict:
-    """Registers, stack and spills of each hand-written variant for sm_90 (``ptxas -v`` on its PTX), without a GPU.
+    """Registers and spills of each hand-written variant for sm_90 (``ptxas -v`` on its PTX), without a GPU.
 
     Needs numba-cuda with NVVM (a CUDA toolkit, or the nvidia-cuda-nvcc wheel's library on LD_LIBRARY_PATH) and
-    ``ptxas``; NUMBA_ENABLE_CUDASIM unset.
+    ``ptxas`` (gpu_throughput.find_ptxas); NUMBA_ENABLE_CUDASIM unset.
     """
-    import re
-    import shutil
-    import subprocess
-    import tempfile
     import types as pytypes
 
+    from gpu_throughput import find_ptxas, ptxas_usage
     from numba import types
     from numba.cuda import dispatcher
 
-    ptxas = shutil.which("ptxas")
-    if ptxas is None:  # the nvidia-cuda-nvcc wheel ships one
-        try:
-            import nvidia.cuda_nvcc as wheel
-
-            ptxas = str(Path(list(wheel.__path__)[0]) / "bin" / "ptxas")
-        except ImportError:
-            pass
-    if ptxas is None or _auto_cuda.simulator_enabled():
-        raise SystemExit("gpu_ceiling --registers: needs ptxas (on PATH or from the nvidia-cuda-nvcc wheel) and "
-                         "NUMBA_ENABLE_CUDASIM unset")
+    if _auto_cuda.simulator_enabled():
+        raise SystemExit("gpu_ceiling --registers: NUMBA_ENABLE_CUDASIM must be unset")
+    try:
+        ptxas = find_ptxas()
+    except ImportError:
+        raise SystemExit("gpu_ceiling --registers: needs ptxas (on PATH or from the nvidia-cuda-nvcc wheel)") from None
     sig = (types.int64, types.int64, types.UniTuple(types.uint32, 20), types.float64[:, ::1], types.float64[::1],
            types.int64[::1])
     current = dispatcher.get_current_device  # no device: the compute capability of an H100
@@ -267,18 +259,10 @@ def registers(names) -> dict:
                 continue
             kernel, opt = make_kernel(v)
             ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
-            with tempfile.TemporaryDirectory() as tmp:
-                path = Path(tmp) / "k.ptx"
-                path.write_text(ptx)
-                cap = [f"-maxrregcount={opt['cap']}"] if opt["cap"] else []
-                info = subprocess.run([ptxas, "-arch=sm_90", "-v", *cap, str(path), "-o", str(Path(tmp) / "k.o")],
-                                      capture_output=True, text=True).stderr
-            regs = re.search(r"Used (\d+) registers", info)
-            stack = re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads", info)
-            out[v] = {"registers": int(regs.group(1)) if regs else None,
-                      "spill_stores": int(stack.group(2)) if stack else None}
+            out[v] = ptxas_usage(ptxas, ptx, opt["cap"])
+            capped = f" -maxrregcount={opt['cap']}" if opt["cap"] else ""
             print(f"{v:<10} {out[v]['registers']} registers/thread, spill stores {out[v]['spill_stores']} B "
-                  f"(sm_90, ptxas{' ' + cap[0] if cap else ''})", flush=True)
+                  f"(sm_90, ptxas{capped})", flush=True)
     finally:
         dispatcher.get_current_device = current
     return out

@@ -151,24 +151,48 @@ def automata(a) -> dict:
     return out
 
 
-def registers(a) -> dict:
-    """Registers per thread of each model's automaton kernel for sm_90 from its PTX (``ptxas -v``), without a GPU.
-
-    Needs numba-cuda, NVVM and NVRTC (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels, their
-    library folders on LD_LIBRARY_PATH) and ``ptxas`` (on PATH, or the one in the nvcc wheel).
-    """
-    import re
+def find_ptxas() -> str:
+    """The ``ptxas`` on PATH, else the one the nvidia-cuda-nvcc wheel ships (ImportError without either)."""
     import shutil
-    import subprocess
-    import tempfile
-
-    from hybrid.stochastic import _auto_cuda
 
     ptxas = shutil.which("ptxas")
     if ptxas is None:
         import nvidia.cuda_nvcc as wheel  # noqa: F401  (the nvidia-cuda-nvcc-cu12 wheel ships ptxas)
 
         ptxas = str(Path(list(wheel.__path__)[0]) / "bin" / "ptxas")
+    return ptxas
+
+
+def ptxas_usage(ptxas: str, ptx: str, cap: int | None = None) -> dict:
+    """Registers, stack frame and spills (bytes) of the first function of ``ptx`` (the kernel: ptxas reports it
+    first) for sm_90, from ``ptxas -v`` (``cap``: ``-maxrregcount``); None where the report lacks a figure."""
+    import re
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "k.ptx"
+        path.write_text(ptx)
+        extra = [f"-maxrregcount={cap}"] if cap else []
+        info = subprocess.run([ptxas, "-arch=sm_90", "-v", *extra, str(path), "-o", str(Path(tmp) / "k.cubin")],
+                              capture_output=True, text=True).stderr
+    regs = re.search(r"Used (\d+) registers", info)
+    stack = re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads", info)
+    return {"registers": int(regs.group(1)) if regs else None,
+            "stack_bytes": int(stack.group(1)) if stack else None,
+            "spill_stores": int(stack.group(2)) if stack else None,
+            "spill_loads": int(stack.group(3)) if stack else None}
+
+
+def registers(a) -> dict:
+    """Registers per thread of each model's automaton kernel for sm_90 from its PTX (``ptxas -v``), without a GPU.
+
+    Needs numba-cuda, NVVM and NVRTC (the ``nvidia-cuda-nvcc-cu12`` and ``nvidia-cuda-nvrtc-cu12`` wheels, their
+    library folders on LD_LIBRARY_PATH) and ``ptxas`` (on PATH, or the one in the nvcc wheel).
+    """
+    from hybrid.stochastic import _auto_cuda
+
+    ptxas = find_ptxas()
     out = {}
     for name, (automaton, scheme, kw) in automaton_models().items():
         obs = dict(automaton.observables) if "observables" not in kw else kw["observables"]
@@ -179,21 +203,7 @@ def registers(a) -> dict:
             ptx = _auto_cuda.compile_ptx(automaton, scheme, obs, histograms_width=width, phases=kw.get("phases", 0),
                                          precision=prec)
             cap = _auto_cuda.DEFAULT_MAX_REGISTERS[prec]
-            with tempfile.TemporaryDirectory() as tmp:
-                path = Path(tmp) / "k.ptx"
-                path.write_text(ptx)
-                infos = [subprocess.run([ptxas, "-arch=sm_90", "-v", *extra, str(path), "-o",
-                                         str(Path(tmp) / "k.cubin")], capture_output=True, text=True).stderr
-                         for extra in ([], [f"-maxrregcount={cap}"])]
-            rows = []
-            for info in infos:  # the kernel's own figures come first in ptxas's report
-                regs = re.search(r"Used (\d+) registers", info)
-                stack = re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads",
-                                  info)
-                rows.append({"registers": int(regs.group(1)) if regs else None,
-                             "stack_bytes": int(stack.group(1)) if stack else None,
-                             "spill_stores": int(stack.group(2)) if stack else None,
-                             "spill_loads": int(stack.group(3)) if stack else None})
+            rows = [ptxas_usage(ptxas, ptx), ptxas_usage(ptxas, ptx, cap)]
             row = dict(rows[0], capped={"cap": cap, **rows[1]}, compile_s=time.perf_counter() - t0)
             out[f"{name} {prec}"] = row
             print(f"{name:<24} {scheme:<10} {prec}: {row['registers']} registers/thread, stack {row['stack_bytes']} "
