@@ -5,11 +5,11 @@ and steps only, never on the threads or workers). Chunk k draws from its own xos
 ``SeedSequence(seed).spawn(n_chunks)[k]`` and fills its own row of every per-chunk array, so the numbers do not
 depend on where or in which order chunks run: threads, a Dask cluster and a resumed checkpoint give the same bits.
 
-:func:`run_chunks` runs the pending chunks of an :class:`AutomatonJob` (:func:`execute`: local threads calling the
-``nogil`` kernel, or Dask) and writes the checkpoint every ``checkpoint_every`` chunks, at the end and on an
-interrupt. Both front ends use it: :func:`~hybrid.stochastic.simulate_automaton` (rows of the automaton's
-statistics) and :func:`~hybrid.stochastic.simulate_ensemble` (an oscillator's automaton job, its rows turned into
-:class:`~hybrid.stochastic.EnsembleStatistics`).
+:func:`run_chunks` runs the pending chunks of an :class:`AutomatonJob` (:func:`execute`, over :func:`map_tasks`:
+local threads calling the ``nogil`` kernel, or Dask) and writes the checkpoint every ``checkpoint_every`` chunks, at
+the end and on an interrupt. Both front ends use it: :func:`~hybrid.stochastic.simulate_automaton` (rows of the
+automaton's statistics) and :func:`~hybrid.stochastic.simulate_ensemble` (an oscillator's automaton job, its rows
+turned into :class:`~hybrid.stochastic.EnsembleStatistics`). The Welch spectra's chunks run on :func:`map_tasks` too.
 
 A checkpoint (:func:`write`, :func:`read`) is an ``.npz`` of named arrays with the format number, the run's identity
 (canonical JSON of every setting that decides the numbers, parameters as exact hex floats), a mask of the finished
@@ -340,40 +340,64 @@ def load(directory: Path, run_id: str, rows: dict, name: str = CHECKPOINT_FILE) 
     return arrays["done"].astype(bool)
 
 
+def map_tasks(fn, tasks: list, accept, *, workers: int, scheduler=None, local=None, label: str = "vibro") -> None:
+    """``fn(*task)`` for every task of ``tasks`` on local threads or Dask: the one executor of the Monte Carlo runs.
+
+    ``accept(i, result)`` takes the result of ``tasks[i]`` in the calling thread: locally in task order, on Dask as
+    the tasks finish (each task's numbers depend on the task alone, so the order decides nothing). Locally,
+    ``workers`` Python threads call ``local`` (default ``fn``), which may hold what Dask cannot ship (a kernel loaded
+    in this process) and must release the GIL to run in parallel; on Dask each task is submitted as ``fn(*task)``
+    (``fn`` a module-level function), with 3 retries, so that a killed worker's tasks run again elsewhere.
+
+    Examples
+    --------
+    >>> out = {}
+    >>> map_tasks(lambda a, b: a * b, [(1, 2), (3, 4)], out.__setitem__, workers=2)
+    >>> out
+    {0: 2, 1: 12}
+    """
+    if scheduler in (None, "threads", "local"):
+        call = fn if local is None else local
+        workers = max(1, min(workers, len(tasks)))
+        if workers == 1:
+            for i, task in enumerate(tasks):
+                accept(i, call(*task))
+            return
+        pool = ThreadPoolExecutor(max_workers=workers)
+        try:
+            for i, out in enumerate(pool.map(lambda task: call(*task), tasks)):
+                accept(i, out)
+        finally:  # on Ctrl-C do not wait for the queued tasks (a checkpoint keeps what is done)
+            pool.shutdown(wait=False, cancel_futures=True)
+        return
+    with dask_client(scheduler) as client:
+        from distributed import as_completed  # present: the client was made
+
+        futures = {client.submit(fn, *task, pure=False, retries=3, key=f"{label}-{i}-{os.getpid()}-{time.time_ns()}"): i
+                   for i, task in enumerate(tasks)}
+        for fut in as_completed(futures):
+            accept(futures[fut], fut.result())
+
+
 def execute(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, threads: int, scheduler=None,
             module=None) -> None:
-    """Run the ``pending`` chunks; ``accept(k, arrays)`` takes each result in the calling thread.
+    """Run the ``pending`` chunks (:func:`map_tasks`); ``accept(k, arrays)`` takes each result in the calling thread.
 
     Locally, ``threads`` Python threads call the ``nogil`` kernel (``module``, default the job's), one chunk per
     call; on Dask each task carries the job (a few kB: scattered data would be lost with a killed worker) and the
     worker loads or compiles the kernel from its source.
     """
-    if scheduler in (None, "threads", "local"):
+    local = scheduler in (None, "threads", "local")
+    if local:
         module = job.module() if module is None else module
-        workers = max(1, min(threads, len(pending)))
-        if workers == 1:
-            for k in pending:
-                accept(k, job.run(k, states[k].copy(), module=module))
-            return
-        pool = ThreadPoolExecutor(max_workers=workers)
-        try:
-            for k, out in zip(pending, pool.map(lambda k: job.run(k, states[k].copy(), module=module), pending)):
-                accept(k, out)
-        finally:  # on Ctrl-C do not wait for the queued chunks (the checkpoint keeps what is done)
-            pool.shutdown(wait=False, cancel_futures=True)
-        return
-    if getattr(job, "user_law", None) is not None:
+    elif getattr(job, "user_law", None) is not None:
         raise ParameterError(
             "a Python-callable restitution law is compiled in memory and cannot be shipped to Dask workers; "
             "declare it as a sympy expression of v (CustomRestitution('...')) or use the local threads"
         )
-    with dask_client(scheduler) as client:
-        from distributed import as_completed  # present: the client was made
-
-        futures = [client.submit(_remote, job, k, states[k].copy(), pure=False, retries=3,
-                                 key=f"vibro-mc-{job.name}-{k}-{os.getpid()}-{time.time_ns()}") for k in pending]
-        for fut in as_completed(futures):
-            accept(*fut.result())
+    map_tasks(_remote, [(job, k, states[k].copy()) for k in pending], lambda i, out: accept(*out),
+              workers=threads, scheduler=scheduler,
+              local=lambda job, k, state: (k, job.run(k, state, module=module)), label=f"vibro-mc-{job.name}")
 
 
 def run_chunks(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, threads: int, scheduler=None,

@@ -273,25 +273,23 @@ def _centred_spectrum(part: dict, mean: float, segment: int, dt_s: float) -> np.
 
 
 def _run_chunks(tasks, scheduler, workers) -> list[dict]:
-    """``welch_chunk_sums(*task)`` for every task, on local threads (the kernel releases the GIL) or Dask; the
-    results in task order whatever order they finish in."""
-    if scheduler in (None, "threads", "local"):
-        if workers is None:
-            import numba
+    """``welch_chunk_sums(*task)`` for every task, on local threads (the kernel releases the GIL) or Dask, by the
+    engine's one executor (:func:`~hybrid.stochastic._auto_exec.map_tasks`); the results in task order."""
+    from . import _auto_exec
 
-            workers = numba.get_num_threads()
-        if workers == 1:
-            return [welch_chunk_sums(*task) for task in tasks]
-        from concurrent.futures import ThreadPoolExecutor
+    if workers is None:
+        import numba
 
-        first = welch_chunk_sums(*tasks[0])  # alone: the kernel is compiled or loaded once, not by every thread
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            return [first, *pool.map(lambda task: welch_chunk_sums(*task), tasks[1:])]
-    from ._auto_exec import dask_client
-
-    with dask_client(scheduler) as client:
-        futures = [client.submit(welch_chunk_sums, *task, pure=False, retries=3) for task in tasks]
-        return [f.result() for f in futures]
+        workers = numba.get_num_threads()
+    results: list = [None] * len(tasks)
+    rest = tasks
+    if scheduler in (None, "threads", "local") and workers > 1:
+        results[0] = welch_chunk_sums(*tasks[0])  # alone: the kernel is compiled or loaded once, not by every thread
+        rest = tasks[1:]
+    offset = len(tasks) - len(rest)
+    _auto_exec.map_tasks(welch_chunk_sums, rest, lambda i, out: results.__setitem__(offset + i, out), workers=workers,
+                         scheduler=scheduler, label="vibro-welch")
+    return results
 
 
 def welch_spectrum(model, observable: str = "x", scheme: str = "splitting", *, dt: float, t_end: float,
