@@ -111,6 +111,31 @@ def test_the_stochastic_engine_has_no_import_cycle():
     assert _cycle(graph) is None, " -> ".join(_cycle(graph))
 
 
+def _uses(needles: tuple) -> dict:
+    """{needle: the project's source files (relative paths) whose code, not their comments, contains it}."""
+    found: dict = {n: set() for n in needles}
+    for package in LAYERS:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            code = "\n".join(line.split("#", 1)[0] for line in path.read_text(encoding="utf-8").splitlines())
+            for n in needles:
+                if n in code:
+                    found[n].add(str(path.relative_to(ROOT)))
+    return found
+
+
+def test_one_code_generator_and_one_executor():
+    """Every Monte Carlo kernel comes from one generator, and every run of chunks (the ensembles of both front ends,
+    first passage, splitting, snapshots, Welch spectra) goes through one executor: only these files define a chunk
+    kernel or start threads or Dask tasks."""
+    found = _uses(("def run_chunk(state", "def event_step(", "ThreadPoolExecutor(", "ProcessPoolExecutor",
+                   "multiprocessing", ".submit("))
+    generator, executor = "hybrid/stochastic/_auto_codegen.py", "hybrid/stochastic/_auto_exec.py"
+    assert found["def run_chunk(state"] == {generator}
+    assert found["def event_step("] == {generator}  # the CUDA target prints the generator's own (a doctest names it)
+    assert found["ThreadPoolExecutor("] == found[".submit("] == {executor}
+    assert not found["ProcessPoolExecutor"] and not found["multiprocessing"]
+
+
 def test_the_cycle_finder_sees_a_function_local_cycle(tmp_path):
     (tmp_path / "a.py").write_text("from . import b\n")
     (tmp_path / "b.py").write_text("def f():\n    from .c import x\n")
