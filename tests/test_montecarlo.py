@@ -335,6 +335,30 @@ def test_weak_order_splitting_with_elastic_barriers():
     assert abs(fit_slope(dts, b) - SCHEMES["splitting"].weak_order_barriers) < 0.4, b
 
 
+def test_em_milstein_and_splitting_agree_within_their_fitted_weak_order_biases():
+    """One inelastic model (no exact answer): each scheme at dt and dt/2 gives its bias at dt, fitted with its declared
+    weak order (Richardson), and the three extrapolations to dt -> 0 agree within 3 combined 95 % intervals, where
+    the raw em value at dt lies beyond them (em's energy pumping, the known pitfall, is resolved and explained).
+    Every run has its own seed, so the intervals are independent."""
+    model = DuffingImpact(restitution=Newton(0.8), a=1.0, b=0.2, c=0.5, D=0.5, delta=1.0)
+    dt, raw, limit = 0.04, {}, {}
+    for i, scheme in enumerate(("em", "milstein", "splitting")):
+        coarse, fine = (simulate_ensemble(model, scheme, dt=h, paths=1024, t_end=400.0, t_burn=20.0,
+                                          seed=31 + 2 * i + j, h_max=20.0, xy_bins=None, check_dt=False)
+                        for j, h in enumerate((dt, dt / 2)))
+        r = 2.0 ** SCHEMES[scheme].weak_order_barriers - 1.0
+        for q in ("mean_energy", "impact_rate"):
+            a, b = getattr(coarse, q), getattr(fine, q)
+            raw[scheme, q] = (a.value, a.ci)
+            limit[scheme, q] = (b.value - (a.value - b.value) / r, math.hypot(b.ci * (1.0 + 1.0 / r), a.ci / r))
+    for q in ("mean_energy", "impact_rate"):
+        for x, y in (("em", "milstein"), ("em", "splitting"), ("milstein", "splitting")):
+            (u, cu), (v, cv) = limit[x, q], limit[y, q]
+            assert abs(u - v) < 3 * math.hypot(cu, cv), (q, x, y, limit)
+    (em, c_em), (sp, c_sp) = raw["em", "mean_energy"], raw["splitting", "mean_energy"]
+    assert em - sp > 3 * math.hypot(c_em, c_sp), raw  # em's bias at dt is resolved, and it adds energy
+
+
 def _linear_recursion(scheme, dt, a, c, D):
     """The scheme on x'' + c x' + a x = sqrt(2D) xi as z' = A z + B xi (written from the scheme's definition)."""
     s = math.sqrt(2 * D)
