@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import inspect
 
+import numpy as np
 import sympy as sp
 
-from hybrid import HybridAutomaton, Mode
+from hybrid import HybridAutomaton, Mode, Transition
 from hybrid.stochastic import _auto_codegen, _kernel_modules
 
 
@@ -79,3 +80,29 @@ def test_a_callable_law_names_its_kernel_by_its_code_not_by_the_function_object(
     other = eval(compile("lambda v: 0.8 + 0.0 * v", "<law>", "eval"))
     a, b, c = names(law, twin, other)
     assert a == b != c and a.startswith(names(other)[0][:-32])
+
+
+def test_the_source_memo_keys_every_input_and_ignores_parameter_values():
+    """generate_source is memoised on the automaton's structure and the options: another parameter value shares
+    the source (values are runtime arguments); a float of a guard changed in its last bit, another scheme, observable
+    or summed set do not; a hit is the text that a fresh generation prints."""
+    x, v = sp.symbols("x v")
+
+    def automaton(wall=0.1, value=0.3):
+        return HybridAutomaton((x, v), {"s": value}, [Mode("m", (v, -x), (0, sp.Symbol("s")))],
+                               [Transition("wall", "m", "m", x - wall, 1, (x, -v))])
+
+    obs = {"H": v**2 / 2 + x**2 / 2}
+    first = _auto_codegen.generate_source(automaton(), "splitting", obs)
+    assert _auto_codegen.generate_source(automaton(value=0.7), "splitting", obs) is first
+    _auto_codegen._SOURCES.clear()
+    assert _auto_codegen.generate_source(automaton(value=0.7), "splitting", obs)[0] == first[0]
+    next_float = float(np.nextafter(0.1, 1.0))
+    others = [_auto_codegen.generate_source(automaton(wall=next_float), "splitting", obs),
+              _auto_codegen.generate_source(automaton(), "em", obs),
+              _auto_codegen.generate_source(automaton(), "splitting", {"H": v**2 / 2}),
+              _auto_codegen.generate_source(automaton(), "splitting", obs, summed=("H",))]
+    assert all(o[0] != first[0] for o in others)
+    assert float.hex(-next_float) in {float.hex(float(a)) for a in sp.preorder_traversal(others[0][1].transitions[0]
+                                                                                           .guard)
+                                      if isinstance(a, sp.Float)}

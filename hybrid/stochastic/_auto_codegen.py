@@ -481,11 +481,33 @@ def _fast_step(st: AutomatonStructure, names: _Names, k: int, scheme: str, parts
     return "\n".join(lines)
 
 
+_SOURCES: dict = {}
+"""Memo of :func:`generate_source`: the key of its inputs (:func:`_source_key`) -> (source, structure)."""
+
+
+def _source_key(automaton, scheme, observables, convention, cache, summed, phases, joint_only) -> str | None:
+    """Every input of the generated CPU source, as text with the floats in full precision (``srepr``): the states with
+    their assumptions, the parameters' names in order (their values are runtime arguments of the kernel), the modes
+    and the transitions (None where a reset is a Python callable, which the generator refuses)."""
+    if any(not tr.symbolic_reset for tr in automaton.transitions):
+        return None
+    declared = (tuple(automaton.states), tuple(automaton.parameters),
+                tuple((m.name, m.flow, m.noise) for m in automaton.modes),
+                tuple((t.name, t.source, t.target, t.guard, t.direction, t.reset, t.priority, t.check)
+                      for t in automaton.transitions),
+                tuple((str(k), sp.sympify(v)) for k, v in observables.items()))
+    return repr((sp.srepr(declared), scheme, convention, bool(cache), tuple(summed), bool(phases), tuple(joint_only)))
+
+
 def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
                     cache: bool = True, summed=(), phases: bool = False,
                     joint_only=(), template: str | None = None, fields: dict | None = None
                     ) -> tuple[str, AutomatonStructure]:
     """The numba module source of ``scheme`` for ``automaton`` and the structure it was derived from.
+
+    Memoised on every input of the CPU source (:func:`_source_key`): the sympy work costs 0.05-0.4 s, as much as a
+    short run, and a parameter sweep or a study calls it again with the same structure (the parameters' values are
+    runtime arguments). The CUDA target's calls (``template``, ``fields``) are not memoised.
 
     ``observables`` maps names to sympy expressions of the states, parameters and ``t``; those named in
     ``summed`` are only summed (means and the joint histogram), not histogrammed; those named in ``joint_only``
@@ -496,6 +518,21 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     the same fields, plus ``fields`` of its own: the CUDA target (:mod:`hybrid.stochastic._auto_cuda`) takes the
     model's functions, the event code and the fast step from here.
     """
+    key = (_source_key(automaton, scheme, observables, convention, cache, summed, phases, joint_only)
+           if template is None and fields is None else None)
+    if key is not None and key in _SOURCES:
+        return _SOURCES[key]
+    out = _generate_source(automaton, scheme, observables, convention, cache, summed, phases, joint_only, template,
+                           fields)
+    if key is not None:
+        if len(_SOURCES) >= 256:  # bounded: a long study of many structures keeps the newest
+            _SOURCES.clear()
+        _SOURCES[key] = out
+    return out
+
+
+def _generate_source(automaton, scheme, observables, convention, cache, summed, phases, joint_only, template,
+                     fields) -> tuple[str, AutomatonStructure]:
     st = analyse(automaton, convention)
     names = _Names(st)
     n, m = len(st.states), st.n_noise
