@@ -9,6 +9,7 @@ from __future__ import annotations
 import inspect
 
 import numpy as np
+import pytest
 import sympy as sp
 
 from hybrid import HybridAutomaton, Mode, Transition
@@ -82,27 +83,44 @@ def test_a_callable_law_names_its_kernel_by_its_code_not_by_the_function_object(
     assert a == b != c and a.startswith(names(other)[0][:-32])
 
 
-def test_the_source_memo_keys_every_input_and_ignores_parameter_values():
-    """generate_source is memoised on the automaton's structure and the options: another parameter value shares
-    the source (values are runtime arguments); a float of a guard changed in its last bit, another scheme, observable
-    or summed set do not; a hit is the text that a fresh generation prints."""
-    x, v = sp.symbols("x v")
+_X, _V, _S = sp.symbols("x v s")
 
-    def automaton(wall=0.1, value=0.3):
-        return HybridAutomaton((x, v), {"s": value}, [Mode("m", (v, -x), (0, sp.Symbol("s")))],
-                               [Transition("wall", "m", "m", x - wall, 1, (x, -v))])
 
-    obs = {"H": v**2 / 2 + x**2 / 2}
-    first = _auto_codegen.generate_source(automaton(), "splitting", obs)
-    assert _auto_codegen.generate_source(automaton(value=0.7), "splitting", obs) is first
+def _memo_automaton(wall=0.1, value=0.3, noise=_S * _V, direction=1, check=None, names=("s", "q")):
+    params = {k: {"s": value, "q": 2.0}[k] for k in names}
+    return HybridAutomaton((_X, _V), params, [Mode("m", (_V, -sp.Symbol("q") * _X), (0, noise))],
+                           [Transition("wall", "m", "m", _X - wall, direction, (_X, -_V), check=check)])
+
+
+_MEMO_OBS = {"H": _V**2 / 2 + _X**2 / 2, "x": _X}
+_MEMO_VARIANTS = {  # one input of the source changed each: (automaton, scheme, observables, keyword arguments)
+    "a guard's float in its last bit": (_memo_automaton(wall=float(np.nextafter(0.1, 1.0))), "splitting",
+                                        _MEMO_OBS, {}),
+    "the noise": (_memo_automaton(noise=2 * _S * _V), "splitting", _MEMO_OBS, {}),
+    "a direction": (_memo_automaton(direction=0), "splitting", _MEMO_OBS, {}),
+    "a check": (_memo_automaton(check=_V < 0), "splitting", _MEMO_OBS, {}),
+    "the parameters' order": (_memo_automaton(names=("q", "s")), "splitting", _MEMO_OBS, {}),
+    "the scheme": (_memo_automaton(), "em", _MEMO_OBS, {}),
+    "an observable": (_memo_automaton(), "splitting", {"H": _V**2 / 2, "x": _X}, {}),
+    "the convention": (_memo_automaton(), "splitting", _MEMO_OBS, {"convention": "ito"}),
+    "the summed set": (_memo_automaton(), "splitting", _MEMO_OBS, {"summed": ("H",)}),
+    "the joint-only set": (_memo_automaton(), "splitting", _MEMO_OBS, {"joint_only": ("x",)}),
+    "phase sections": (_memo_automaton(), "splitting", _MEMO_OBS, {"phases": True}),
+    "the disk cache": (_memo_automaton(), "splitting", _MEMO_OBS, {"cache": False}),
+}
+
+
+def test_the_source_memo_shares_a_structure_whatever_the_parameter_values():
+    """generate_source is memoised: another parameter value gives the very same object (values are runtime
+    arguments), and a hit is the text that a fresh generation prints."""
+    first = _auto_codegen.generate_source(_memo_automaton(), "splitting", _MEMO_OBS)
+    assert _auto_codegen.generate_source(_memo_automaton(value=0.7), "splitting", _MEMO_OBS) is first
     _auto_codegen._SOURCES.clear()
-    assert _auto_codegen.generate_source(automaton(value=0.7), "splitting", obs)[0] == first[0]
-    next_float = float(np.nextafter(0.1, 1.0))
-    others = [_auto_codegen.generate_source(automaton(wall=next_float), "splitting", obs),
-              _auto_codegen.generate_source(automaton(), "em", obs),
-              _auto_codegen.generate_source(automaton(), "splitting", {"H": v**2 / 2}),
-              _auto_codegen.generate_source(automaton(), "splitting", obs, summed=("H",))]
-    assert all(o[0] != first[0] for o in others)
-    assert float.hex(-next_float) in {float.hex(float(a)) for a in sp.preorder_traversal(others[0][1].transitions[0]
-                                                                                           .guard)
-                                      if isinstance(a, sp.Float)}
+    assert _auto_codegen.generate_source(_memo_automaton(value=0.7), "splitting", _MEMO_OBS)[0] == first[0]
+
+
+@pytest.mark.parametrize("change", list(_MEMO_VARIANTS))
+def test_the_source_memo_misses_when_any_input_of_the_source_changes(change):
+    base = _auto_codegen.generate_source(_memo_automaton(), "splitting", _MEMO_OBS)[0]
+    automaton, scheme, obs, kwargs = _MEMO_VARIANTS[change]
+    assert _auto_codegen.generate_source(automaton, scheme, obs, **kwargs)[0] != base

@@ -496,7 +496,7 @@ def _source_key(automaton, scheme, observables, convention, cache, summed, phase
                 tuple((t.name, t.source, t.target, t.guard, t.direction, t.reset, t.priority, t.check)
                       for t in automaton.transitions),
                 tuple((str(k), sp.sympify(v)) for k, v in observables.items()))
-    return repr((sp.srepr(declared), scheme, convention, bool(cache), tuple(summed), bool(phases), tuple(joint_only)))
+    return repr((sp.srepr(declared), scheme, convention, cache, summed, phases, joint_only))
 
 
 def generate_source(automaton, scheme: str, observables: dict, convention: str = "stratonovich",
@@ -518,14 +518,18 @@ def generate_source(automaton, scheme: str, observables: dict, convention: str =
     the same fields, plus ``fields`` of its own: the CUDA target (:mod:`hybrid.stochastic._auto_cuda`) takes the
     model's functions, the event code and the fast step from here.
     """
+    # one spelling of each option, for the key and the generator alike (the generator tests ``name in summed``)
+    summed, joint_only = tuple(summed), tuple(joint_only)
+    cache, phases = bool(cache), bool(phases)
     key = (_source_key(automaton, scheme, observables, convention, cache, summed, phases, joint_only)
            if template is None and fields is None else None)
-    if key is not None and key in _SOURCES:
-        return _SOURCES[key]
+    hit = _SOURCES.get(key) if key is not None else None  # get(): another thread may clear the memo meanwhile
+    if hit is not None:
+        return hit
     out = _generate_source(automaton, scheme, observables, convention, cache, summed, phases, joint_only, template,
                            fields)
     if key is not None:
-        if len(_SOURCES) >= 256:  # bounded: a long study of many structures keeps the newest
+        if len(_SOURCES) >= 256:  # bounded: a study of many structures starts the memo again
             _SOURCES.clear()
         _SOURCES[key] = out
     return out

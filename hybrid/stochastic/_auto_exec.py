@@ -340,14 +340,30 @@ def load(directory: Path, run_id: str, rows: dict, name: str = CHECKPOINT_FILE) 
     return arrays["done"].astype(bool)
 
 
-def map_tasks(fn, tasks: list, accept, *, workers: int, scheduler=None, local=None, label: str = "vibro") -> None:
+def map_tasks(fn, tasks: list, accept, *, workers: int, scheduler=None, local=None, label: str = "vibro",
+              names=None) -> None:
     """``fn(*task)`` for every task of ``tasks`` on local threads or Dask: the one executor of the Monte Carlo runs.
 
-    ``accept(i, result)`` takes the result of ``tasks[i]`` in the calling thread: locally in task order, on Dask as
-    the tasks finish (each task's numbers depend on the task alone, so the order decides nothing). Locally,
-    ``workers`` Python threads call ``local`` (default ``fn``), which may hold what Dask cannot ship (a kernel loaded
-    in this process) and must release the GIL to run in parallel; on Dask each task is submitted as ``fn(*task)``
-    (``fn`` a module-level function), with 3 retries, so that a killed worker's tasks run again elsewhere.
+    Parameters
+    ----------
+    fn : callable
+        Run as ``fn(*task)``; on Dask it must be a module-level function (it is pickled with its arguments).
+    tasks : list of tuple
+        The arguments of each task. Each task's numbers must depend on the task alone, so that the order in which
+        tasks finish decides nothing.
+    accept : callable
+        ``accept(i, result)`` takes the result of ``tasks[i]`` in the calling thread: locally in task order, on Dask
+        as the tasks finish.
+    workers : int
+        Local Python threads (at most one per task); the functions they call must release the GIL to run in parallel.
+    scheduler : None, "threads", "local", "dask", "dask=ADDRESS" or a ``distributed.Client``
+    local : callable, optional
+        What the threads call instead of ``fn``: one that may hold what Dask cannot ship (a kernel loaded in this
+        process).
+    label, names : str, sequence, optional
+        Dask task keys are ``{label}-{names[i]}-{pid}-{ns}`` (``names`` defaults to the task indices), so that the
+        dashboard names a run's chunks by their numbers. Each task has 3 retries: a killed worker's tasks run again
+        elsewhere.
 
     Examples
     --------
@@ -373,8 +389,10 @@ def map_tasks(fn, tasks: list, accept, *, workers: int, scheduler=None, local=No
     with dask_client(scheduler) as client:
         from distributed import as_completed  # present: the client was made
 
-        futures = {client.submit(fn, *task, pure=False, retries=3, key=f"{label}-{i}-{os.getpid()}-{time.time_ns()}"): i
-                   for i, task in enumerate(tasks)}
+        names = range(len(tasks)) if names is None else names
+        futures = {client.submit(fn, *task, pure=False, retries=3,
+                                 key=f"{label}-{name}-{os.getpid()}-{time.time_ns()}"): i
+                   for i, (task, name) in enumerate(zip(tasks, names))}
         for fut in as_completed(futures):
             accept(futures[fut], fut.result())
 
@@ -397,7 +415,8 @@ def execute(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, thr
         )
     map_tasks(_remote, [(job, k, states[k].copy()) for k in pending], lambda i, out: accept(*out),
               workers=threads, scheduler=scheduler,
-              local=lambda job, k, state: (k, job.run(k, state, module=module)), label=f"vibro-mc-{job.name}")
+              local=lambda job, k, state: (k, job.run(k, state, module=module)), label=f"vibro-mc-{job.name}",
+              names=pending)
 
 
 def run_chunks(job: AutomatonJob, pending: list, states: np.ndarray, accept, *, threads: int, scheduler=None,
