@@ -96,15 +96,16 @@ class AutomatonStructure:
     n_noise: int
 
 
-def noise_matrix(mode, n: int) -> sp.Matrix:
-    """The n x m noise matrix of ``mode``: its ``noise`` as a column (one noise) or as rows of m entries."""
+def noise_matrix(mode, n: int) -> sp.ImmutableMatrix:
+    """The n x m noise matrix of ``mode``: its ``noise`` as a column (one noise) or as rows of m entries (immutable:
+    the structure that holds it is shared by the memoised sources of :func:`generate_source`)."""
     if mode.noise is None:
-        return sp.zeros(n, 1)
+        return sp.ImmutableMatrix(sp.zeros(n, 1))
     rows = [list(r) if isinstance(r, (tuple, list)) else [r] for r in mode.noise]
     widths = {len(r) for r in rows}
     if len(rows) != n or len(widths) != 1:
         raise ModelError(f"mode {mode.name!r}: the noise must be {n} rows of equally many entries (one per noise)")
-    return sp.Matrix(rows)
+    return sp.ImmutableMatrix(rows)
 
 
 def analyse(automaton, convention: str = "stratonovich") -> AutomatonStructure:
