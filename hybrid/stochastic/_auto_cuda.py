@@ -542,6 +542,9 @@ class CudaRun:
                         floats(a["j_scale"]), ints(a["j_bins"]), ft(a["v_scale"]), np.int64(a["v_bins"]))
         self._check_memory(int(job.npaths.sum()))  # before any compile or launch
 
+    REDUCED = ("counts", "sums", "psums", "events", "vsum", "gstat", "fbad")
+    """The runner's per-chunk rows that :meth:`chunk_rows` sums on the device, in ``reduce_chunks``' order."""
+
     def row_shapes(self, paths: int) -> dict:
         """Shape and dtype of each per-path row array of ``paths`` paths (:data:`ORDER` but the histogram cells):
         one layout for the host's rows, the device's and the memory estimate."""
@@ -671,16 +674,12 @@ class CudaRun:
         cuda, mod = self.cuda, self.module
         cp = int(self.job.shapes["elog"][0][0])
         n_chunks = rows["counts"].shape[0]
-        nt = max(self.n_trans, 1)
-        out = {"counts": (rows["counts"].shape, np.int64), "sums": ((n_chunks, self.n_obs), np.float64),
-               "psums": ((n_chunks, max(self.phases, 1), self.n_obs), np.float64),
-               "events": ((n_chunks, nt), np.int64), "vsum": ((n_chunks, nt), np.float64),
-               "gstat": ((n_chunks, nt, 4), np.float64), "fbad": ((n_chunks,), np.float64)}
-        red = {k: cuda.device_array(shape, dtype) for k, (shape, dtype) in out.items()}
+        # the runner's own shapes, zeros where the kernel writes nothing (no transition, no phase section)
+        red = {k: cuda.to_device(np.zeros_like(rows[k])) for k in self.REDUCED}
         _cuda_rows.reduce_chunks[max(1, -(-n_chunks // 128)), 128](
             np.int64(cp), np.int64(mod.IW_EVENTS), np.int64(mod.FW_GSTAT), np.int64(mod.FW_FBAD),
             np.int64(self.n_trans), dev["CNT"], dev["SM"], dev["PSM"], dev["IWS"], dev["FWS"],
-            *(red[k] for k in out))
+            *(red[k] for k in self.REDUCED))
         cuda.synchronize()
         host = {k: v.copy_to_host() for k, v in red.items()}
         host["gh"] = dev["gh"].copy_to_host()
@@ -708,14 +707,8 @@ class CudaRun:
         cp = self.job.shapes["elog"][0][0]
         paths = int(self.job.npaths.sum())
         starts = np.arange(0, paths, cp)
-        rows["counts"][:] = r["counts"]
-        rows["sums"][:] = r["sums"]
-        nt = self.n_trans
-        if nt:
-            rows["events"][:, :nt] = r["events"][:, :nt]
-            rows["vsum"][:, :nt] = r["vsum"][:, :nt]
-            rows["gstat"][:, :nt] = r["gstat"][:, :nt]
-        rows["fbad"][:, 0] = r["fbad"]
+        for k in self.REDUCED:
+            rows[k][:] = r[k]
         if "elogs" in r:
             n_log = rows["elog"].shape[2]
             padded = np.full((len(starts) * cp, n_log, 3), np.nan)
@@ -725,13 +718,12 @@ class CudaRun:
             nlog[:paths] = r["nlog"]
             rows["nlog"][:] = nlog.reshape(len(starts), cp)
         gh = r["gh"]
-        nv = max(nt, 1)
+        nv = max(self.n_trans, 1)
         rows["vhist"][0] = gh[:nv * lay["vw"]].reshape(nv, lay["vw"])
         rows["hist"][0] = gh[lay["h_off"]:lay["j_off"]].reshape(self.n_obs, self.width)
         rows["jhist"][0] = gh[lay["j_off"]:lay["p_off"]].reshape(rows["jhist"].shape[1:])
         if self.phases:
             rows["phist"][0] = gh[lay["p_off"]:].reshape(self.phases, self.n_obs, self.width)
-            rows["psums"][:] = r["psums"]
             # every path samples section k at the same steps: (step + 1) a multiple of phase_steps, after burn-in
             ends = np.arange(a["n_burn"] + 1, total + 1)
             ends = ends[ends % a["phase_steps"] == 0]

@@ -102,4 +102,4 @@ def reduce_chunks(cp, iw_events, fw_gstat, fw_fbad, n_trans, CNT, SM, PSM, IWS, 
         if IWS[p, 5] != 0:
             first = FWS[p, fw_fbad]
             break
-    fbad[c] = first
+    fbad[c, 0] = first
