@@ -236,11 +236,8 @@ def registers(names) -> dict:
     Needs numba-cuda with NVVM (a CUDA toolkit, or the nvidia-cuda-nvcc wheel's library on LD_LIBRARY_PATH) and
     ``ptxas`` (gpu_throughput.find_ptxas); NUMBA_ENABLE_CUDASIM unset.
     """
-    import types as pytypes
-
     from gpu_throughput import find_ptxas, ptxas_usage
     from numba import types
-    from numba.cuda import dispatcher
 
     if _auto_cuda.simulator_enabled():
         raise SystemExit("gpu_ceiling --registers: NUMBA_ENABLE_CUDASIM must be unset")
@@ -250,10 +247,8 @@ def registers(names) -> dict:
         raise SystemExit("gpu_ceiling --registers: needs ptxas (on PATH or from the nvidia-cuda-nvcc wheel)") from None
     sig = (types.int64, types.int64, types.UniTuple(types.uint32, 20), types.float64[:, ::1], types.float64[::1],
            types.int64[::1])
-    current = dispatcher.get_current_device  # no device: the compute capability of an H100
-    dispatcher.get_current_device = lambda: pytypes.SimpleNamespace(compute_capability=(9, 0))
     out = {}
-    try:
+    with _auto_cuda.assumed_device((9, 0)):  # no device: the compute capability of an H100
         for v in names:
             if v not in HAND:
                 continue
@@ -263,8 +258,6 @@ def registers(names) -> dict:
             capped = f" -maxrregcount={opt['cap']}" if opt["cap"] else ""
             print(f"{v:<10} {out[v]['registers']} registers/thread, spill stores {out[v]['spill_stores']} B "
                   f"(sm_90, ptxas{capped})", flush=True)
-    finally:
-        dispatcher.get_current_device = current
     return out
 
 

@@ -36,6 +36,7 @@ what to do in one line.
 from __future__ import annotations
 
 import ast
+import contextlib
 import math
 import re
 import textwrap
@@ -943,15 +944,30 @@ def compile_ptx(automaton, scheme: str, observables: dict, *, histograms_width: 
                                    record=record)
     name = f"vibro_auto_cuda_ptx_{scheme}_{precision}_{_auto_codegen.kernel_key(src)}"
     module, _ = _kernel_modules.load_source(name, src)
+    with assumed_device(cc):
+        signature = kernel_signature(precision, record, len(st.params), len(observables), module.N_HOISTED)
+        ptx, _ = cuda.compile_ptx(module.advance.py_func, signature, cc=cc)
+    return ptx
+
+
+@contextlib.contextmanager
+def assumed_device(cc=(9, 0)):
+    """Within the block, numba-cuda's current device is one of compute capability ``cc``: it compiles a kernel's
+    device functions for the current device, and without a GPU there is none (a PTX compile on a machine without
+    one: :func:`compile_ptx`, ``benchmarks/gpu_ceiling.py --registers``).
+
+    Examples
+    --------
+    >>> from numba.cuda import dispatcher
+    >>> with assumed_device((8, 0)):
+    ...     dispatcher.get_current_device().compute_capability
+    (8, 0)
+    """
     from numba.cuda import dispatcher
 
-    # numba-cuda compiles a kernel's device functions for the current device's compute capability; without a device
-    # there is none, so it is given for this compile only
     current = dispatcher.get_current_device
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=tuple(cc))
     try:
-        signature = kernel_signature(precision, record, len(st.params), len(observables), module.N_HOISTED)
-        ptx, _ = cuda.compile_ptx(module.advance.py_func, signature, cc=cc)
+        yield
     finally:
         dispatcher.get_current_device = current
-    return ptx
